@@ -1,0 +1,1 @@
+"""Subcommands of ``imu-square`` that talk to hardware: registered by entry point."""

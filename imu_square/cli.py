@@ -1,0 +1,98 @@
+"""The ``imu-square`` command: parses arguments and calls library functions.
+
+Subcommands are the modules of :mod:`imu_square.commands`, plus the modules of
+any package registered under the ``imu_square.commands`` entry-point group
+(the ``acquisition`` package registers its own that way, so the library never
+imports it). Each module defines ``register(subparsers)``, which adds one
+parser whose ``func`` default takes the parsed arguments and returns an exit
+code.
+
+Human-readable text goes to stderr; machine-readable results go to stdout.
+A user's mistake is one line on stderr and a non-zero exit, never a traceback.
+"""
+
+import argparse
+import importlib
+import logging
+import pkgutil
+import sys
+import warnings
+from importlib.metadata import entry_points
+
+from imu_square import __version__
+from imu_square.errors import ImuSquareError
+
+EXIT_OK = 0
+EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
+
+
+def _command_modules():
+    packages = [importlib.import_module("imu_square.commands")]
+    for ep in entry_points(group="imu_square.commands"):
+        packages.append(ep.load())
+    for package in packages:
+        for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+            if not info.name.startswith("_"):
+                yield importlib.import_module(f"{package.__name__}.{info.name}")
+
+
+def build_parser():
+    """The argument parser with every subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog="imu-square",
+        description="Machine-tool squareness from a table-mounted accelerometer.",
+    )
+    parser.add_argument("--version", action="version", version=f"imu-square {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more status output")
+    parser.add_argument("-q", "--quiet", action="store_true", help="errors only")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module in _command_modules():
+        module.register(sub)
+    return parser
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"imu-square: warning: {message}", file=sys.stderr)
+
+
+def main(argv=None):
+    """Run the CLI.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments without the program name; ``sys.argv[1:]`` by default.
+
+    Returns
+    -------
+    int
+        The exit code.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help(sys.stderr)
+        return EXIT_USER_ERROR
+    level = logging.WARNING if args.quiet else (logging.DEBUG if args.verbose > 1 else logging.INFO)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log = logging.getLogger("imu_square")
+    log.handlers = [h for h in log.handlers if isinstance(h, logging.NullHandler)] + [handler]
+    log.setLevel(level)
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        try:
+            return int(args.func(args) or EXIT_OK)
+        except ImuSquareError as exc:
+            print(f"imu-square {args.command}: error: {exc}", file=sys.stderr)
+            return EXIT_USER_ERROR
+        except KeyboardInterrupt:
+            print(f"imu-square {args.command}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        finally:
+            log.removeHandler(handler)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``imu-square``: one module each, with ``register(subparsers)``."""

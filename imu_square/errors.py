@@ -1,0 +1,57 @@
+"""The project's one error tree and one warning class.
+
+Every user mistake raises a subclass of :class:`ImuSquareError` whose message
+names the file or parameter, what was allowed and what was received. The CLI
+prints such an error as one line on stderr and exits non-zero.
+"""
+
+
+class ImuSquareError(Exception):
+    """Base class of every error a user can cause."""
+
+
+class ProgramError(ImuSquareError):
+    """The test program (TOML) is malformed or physically implausible."""
+
+
+class RecordingError(ImuSquareError):
+    """A recording file is missing, corrupt, truncated or in the wrong units."""
+
+
+class ConfigError(ImuSquareError):
+    """A machine or sensor description (TOML) is malformed."""
+
+
+class AnalysisError(ImuSquareError):
+    """The data cannot give a trustworthy squareness (too few cycles, no motion, ...)."""
+
+
+class AcquisitionError(ImuSquareError):
+    """The serial link or the device misbehaved in a way the recorder cannot absorb."""
+
+
+class ImuSquareWarning(UserWarning):
+    """A recoverable oddity: the result is still produced, but say so."""
+
+
+def check_option(name, value, allowed):
+    """Raise if ``value`` is not one of ``allowed``.
+
+    Parameters
+    ----------
+    name : str
+        Parameter or field name, used in the message.
+    value : object
+        Value received.
+    allowed : iterable
+        Allowed values.
+
+    Returns
+    -------
+    object
+        ``value`` unchanged.
+    """
+    allowed = tuple(allowed)
+    if value not in allowed:
+        raise ImuSquareError(f"{name} must be one of {allowed!r}, got {value!r}")
+    return value

@@ -1,0 +1,453 @@
+"""The circle test program: validation, units and nominal timing.
+
+A program file is TOML in the units machinists use (mm, mm/min, degrees)::
+
+    [program]
+    plane = "XY"
+    radius_mm = 100.0
+    feed_mm_per_min = 6000.0
+    cycles_per_direction = 15
+    overshoot_deg = 180.0
+    start_angle_deg = 0.0
+    order = ["ccw", "cw"]
+    dwell_s = 2.0
+    runs = 1
+    centre_mm = [0.0, 0.0]      # optional: circle centre in machine coordinates
+
+Inside the code everything is SI. Position angle ``phi`` is the commanded
+angle of the tool on the circle, measured from +X towards +Y; a CCW block
+increases it, a CW block decreases it. Each block runs
+``overshoot + cycles_per_direction * 360 + overshoot`` degrees and starts
+where the previous block ended; only the middle whole cycles are analysed.
+"""
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from imu_square.errors import ProgramError
+
+DIRECTIONS = ("ccw", "cw")
+SUPPORTED_PLANES = ("XY",)
+
+# Plausible centripetal acceleration for a circle test on a machine tool.
+# Below ~5 mm/s^2 the signal drowns in a MEMS sensor's noise and drift; above
+# ~2 g no machine tool runs a stable circle.
+MIN_CENTRIPETAL_M_S2 = 0.005
+MAX_CENTRIPETAL_M_S2 = 20.0
+MAX_RADIUS_M = 1.0
+MAX_FEED_M_PER_S = 2.0
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """One CCW or CW block of the program at nominal (constant) feed.
+
+    Attributes
+    ----------
+    index : int
+        Block number from 0, counting over all runs.
+    run : int
+        Run number from 0.
+    direction : str
+        ``"ccw"`` or ``"cw"``.
+    sign : int
+        +1 for CCW (position angle increases), -1 for CW.
+    start_angle_rad : float
+        Commanded position angle where the block starts. [rad]
+    t_start_s, t_end_s : float
+        Nominal start and end of motion from the start of the first block. [s]
+    analysed_start_rad : float
+        Position angle where the first analysed cycle starts (after the
+        overshoot). [rad]
+    """
+
+    index: int
+    run: int
+    direction: str
+    sign: int
+    start_angle_rad: float
+    t_start_s: float
+    t_end_s: float
+    analysed_start_rad: float
+
+    @property
+    def duration_s(self):
+        """Nominal duration of the block's motion. [s]"""
+        return self.t_end_s - self.t_start_s
+
+    @property
+    def t_mid_s(self):
+        """Nominal middle of the block's motion. [s]"""
+        return 0.5 * (self.t_start_s + self.t_end_s)
+
+
+@dataclass(frozen=True)
+class TestProgram:
+    """A validated circle test program, in SI units.
+
+    Build one with :func:`read_program` or :func:`program_from_mapping`; the
+    constructor assumes validated values.
+
+    Attributes
+    ----------
+    plane : str
+        Plane of the circle; only ``"XY"`` is supported.
+    radius_m : float
+        Circle radius. [m]
+    feed_m_per_s : float
+        Programmed path speed. [m/s]
+    cycles_per_direction : int
+        Whole analysed cycles in each block.
+    overshoot_rad : float
+        Extra motion at the start and at the end of each block. [rad]
+    start_angle_rad : float
+        Position angle where the first block starts. [rad]
+    order : tuple of str
+        Directions of the blocks in one run, e.g. ``("ccw", "cw")``.
+    dwell_s : float
+        Pause between blocks. [s]
+    runs : int
+        Number of repetitions of ``order``.
+    centre_m : tuple of float
+        Circle centre in machine coordinates. [m]
+    """
+
+    __test__ = False  # not a pytest test class, despite the name
+
+    plane: str = "XY"
+    radius_m: float = 0.1
+    feed_m_per_s: float = 0.1
+    cycles_per_direction: int = 15
+    overshoot_rad: float = math.pi
+    start_angle_rad: float = 0.0
+    order: tuple = ("ccw", "cw")
+    dwell_s: float = 2.0
+    runs: int = 1
+    centre_m: tuple = field(default=(0.0, 0.0))
+
+    @property
+    def omega_rad_s(self):
+        """Angular speed of the tool on the circle. [rad/s]"""
+        return self.feed_m_per_s / self.radius_m
+
+    @property
+    def frequency_hz(self):
+        """Circle frequency. [Hz]"""
+        return self.omega_rad_s / (2 * math.pi)
+
+    @property
+    def period_s(self):
+        """Time for one full cycle at the programmed feed. [s]"""
+        return 2 * math.pi / self.omega_rad_s
+
+    @property
+    def centripetal_m_s2(self):
+        """Centripetal acceleration v^2/r at the programmed feed. [m/s^2]"""
+        return self.feed_m_per_s**2 / self.radius_m
+
+    @property
+    def block_angle_rad(self):
+        """Total angle travelled in one block, overshoots included. [rad]"""
+        return 2 * math.pi * self.cycles_per_direction + 2 * self.overshoot_rad
+
+    @property
+    def block_duration_s(self):
+        """Nominal duration of one block at constant feed. [s]"""
+        return self.block_angle_rad / self.omega_rad_s
+
+    @property
+    def n_blocks(self):
+        """Number of blocks over all runs."""
+        return len(self.order) * self.runs
+
+    @property
+    def duration_s(self):
+        """Nominal duration from the start of the first block to the end of the last. [s]"""
+        return self.n_blocks * self.block_duration_s + (self.n_blocks - 1) * self.dwell_s
+
+    def blocks(self):
+        """Nominal plan of every block, in execution order.
+
+        Returns
+        -------
+        list of BlockPlan
+        """
+        plans = []
+        angle = self.start_angle_rad
+        t = 0.0
+        for run in range(self.runs):
+            for direction in self.order:
+                sign = 1 if direction == "ccw" else -1
+                plans.append(
+                    BlockPlan(
+                        index=len(plans),
+                        run=run,
+                        direction=direction,
+                        sign=sign,
+                        start_angle_rad=angle,
+                        t_start_s=t,
+                        t_end_s=t + self.block_duration_s,
+                        analysed_start_rad=angle + sign * self.overshoot_rad,
+                    )
+                )
+                angle += sign * self.block_angle_rad
+                t += self.block_duration_s + self.dwell_s
+        return plans
+
+    def nominal_angle(self, block, t_s):
+        """Commanded position angle at time ``t_s`` within ``block``, at constant feed.
+
+        Parameters
+        ----------
+        block : BlockPlan
+            The block.
+        t_s : float or ndarray
+            Time from the start of the first block. [s]
+
+        Returns
+        -------
+        float or ndarray
+            Position angle. [rad]
+        """
+        return block.start_angle_rad + block.sign * self.omega_rad_s * (t_s - block.t_start_s)
+
+    def nominal_time(self, block, phi_rad):
+        """Time at which ``block`` passes position angle ``phi_rad``, at constant feed.
+
+        Parameters
+        ----------
+        block : BlockPlan
+            The block.
+        phi_rad : float or ndarray
+            Position angle, unwrapped along the block. [rad]
+
+        Returns
+        -------
+        float or ndarray
+            Time from the start of the first block. [s]
+        """
+        return block.t_start_s + block.sign * (phi_rad - block.start_angle_rad) / self.omega_rad_s
+
+    def to_mapping(self):
+        """The program as a ``[program]`` table in file units (mm, mm/min, degrees)."""
+        return {
+            "plane": self.plane,
+            "radius_mm": self.radius_m * 1e3,
+            "feed_mm_per_min": self.feed_m_per_s * 6e4,
+            "cycles_per_direction": self.cycles_per_direction,
+            "overshoot_deg": math.degrees(self.overshoot_rad),
+            "start_angle_deg": math.degrees(self.start_angle_rad),
+            "order": list(self.order),
+            "dwell_s": self.dwell_s,
+            "runs": self.runs,
+            "centre_mm": [c * 1e3 for c in self.centre_m],
+        }
+
+    def to_toml(self):
+        """The program as TOML text that :func:`read_program` reads back exactly."""
+        lines = ["[program]"]
+        for key, value in self.to_mapping().items():
+            lines.append(f"{key} = {_toml_value(value)}")
+        return "\n".join(lines) + "\n"
+
+    def as_dict(self):
+        """All fields in SI units, for JSON."""
+        return asdict(self)
+
+
+def _toml_value(value):
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, float):
+        return repr(value)
+    return str(value)
+
+
+_FIELDS = {
+    "plane": str,
+    "radius_mm": float,
+    "feed_mm_per_min": float,
+    "cycles_per_direction": int,
+    "overshoot_deg": float,
+    "start_angle_deg": float,
+    "order": list,
+    "dwell_s": float,
+    "runs": int,
+    "centre_mm": list,
+}
+_REQUIRED = ("radius_mm", "feed_mm_per_min", "cycles_per_direction")
+
+
+def _number(source, key, value, kind):
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ProgramError(f"{source}: [program] {key} must be a number, got {value!r}")
+    if kind is int:
+        if isinstance(value, float) and not value.is_integer():
+            raise ProgramError(f"{source}: [program] {key} must be a whole number, got {value!r}")
+        return int(value)
+    value = float(value)
+    if not math.isfinite(value):
+        raise ProgramError(f"{source}: [program] {key} must be finite, got {value!r}")
+    return value
+
+
+def program_from_mapping(table, source="<program>"):
+    """Validate a ``[program]`` table and convert it to SI.
+
+    Parameters
+    ----------
+    table : dict
+        The ``[program]`` table, in file units (mm, mm/min, degrees, s).
+    source : str
+        Where the table came from, for error messages.
+
+    Returns
+    -------
+    TestProgram
+
+    Raises
+    ------
+    ProgramError
+        Naming the field, the value received and what is allowed.
+    """
+    if not isinstance(table, dict):
+        raise ProgramError(f"{source}: [program] must be a table, got {table!r}")
+    unknown = sorted(set(table) - set(_FIELDS))
+    if unknown:
+        raise ProgramError(
+            f"{source}: [program] has unknown field {unknown[0]!r}; allowed: {sorted(_FIELDS)}"
+        )
+    for key in _REQUIRED:
+        if key not in table:
+            raise ProgramError(f"{source}: [program] is missing the required field {key!r}")
+    d = TestProgram()
+    get = table.get
+
+    plane = get("plane", d.plane)
+    if plane not in SUPPORTED_PLANES:
+        raise ProgramError(
+            f"{source}: [program] plane must be one of {SUPPORTED_PLANES!r}, got {plane!r}"
+        )
+    radius_mm = _number(source, "radius_mm", get("radius_mm"), float)
+    if not 0 < radius_mm <= MAX_RADIUS_M * 1e3:
+        raise ProgramError(
+            f"{source}: [program] radius_mm must be in (0, {MAX_RADIUS_M * 1e3:g}], "
+            f"got {radius_mm!r}"
+        )
+    feed = _number(source, "feed_mm_per_min", get("feed_mm_per_min"), float)
+    if not 0 < feed <= MAX_FEED_M_PER_S * 6e4:
+        raise ProgramError(
+            f"{source}: [program] feed_mm_per_min must be in (0, {MAX_FEED_M_PER_S * 6e4:g}], "
+            f"got {feed!r}"
+        )
+    cycles = _number(source, "cycles_per_direction", get("cycles_per_direction"), int)
+    if not 2 <= cycles <= 1000:
+        raise ProgramError(
+            f"{source}: [program] cycles_per_direction must be a whole number in [2, 1000], "
+            f"got {cycles!r}"
+        )
+    overshoot = _number(source, "overshoot_deg", get("overshoot_deg", 180.0), float)
+    if not 0 <= overshoot <= 360:
+        raise ProgramError(
+            f"{source}: [program] overshoot_deg must be in [0, 360], got {overshoot!r}"
+        )
+    start = _number(source, "start_angle_deg", get("start_angle_deg", 0.0), float)
+    order = get("order", list(d.order))
+    if (
+        not isinstance(order, list)
+        or not order
+        or any(o not in DIRECTIONS for o in order)
+        or set(order) != set(DIRECTIONS)
+    ):
+        raise ProgramError(
+            f"{source}: [program] order must list 'ccw' and 'cw' (each at least once), "
+            f"got {order!r}"
+        )
+    dwell = _number(source, "dwell_s", get("dwell_s", d.dwell_s), float)
+    if not 0 <= dwell <= 600:
+        raise ProgramError(f"{source}: [program] dwell_s must be in [0, 600], got {dwell!r}")
+    runs = _number(source, "runs", get("runs", d.runs), int)
+    if not 1 <= runs <= 1000:
+        raise ProgramError(f"{source}: [program] runs must be in [1, 1000], got {runs!r}")
+    centre = get("centre_mm", [0.0, 0.0])
+    if not isinstance(centre, list) or len(centre) != 2:
+        raise ProgramError(f"{source}: [program] centre_mm must be [x, y] in mm, got {centre!r}")
+    centre = [_number(source, "centre_mm", c, float) for c in centre]
+
+    radius_m = radius_mm * 1e-3
+    feed_m_per_s = feed / 6e4
+    centripetal = feed_m_per_s**2 / radius_m
+    if not MIN_CENTRIPETAL_M_S2 <= centripetal <= MAX_CENTRIPETAL_M_S2:
+        raise ProgramError(
+            f"{source}: [program] feed_mm_per_min={feed:g} with radius_mm={radius_mm:g} gives a "
+            f"centripetal acceleration of {centripetal:.3g} m/s^2; a machine-tool circle test "
+            f"needs {MIN_CENTRIPETAL_M_S2:g} to {MAX_CENTRIPETAL_M_S2:g} m/s^2"
+        )
+    return TestProgram(
+        plane=plane,
+        radius_m=radius_m,
+        feed_m_per_s=feed_m_per_s,
+        cycles_per_direction=cycles,
+        overshoot_rad=math.radians(overshoot),
+        start_angle_rad=math.radians(start),
+        order=tuple(order),
+        dwell_s=dwell,
+        runs=runs,
+        centre_m=(centre[0] * 1e-3, centre[1] * 1e-3),
+    )
+
+
+def parse_program(text, source="<program>"):
+    """Parse program TOML text.
+
+    Parameters
+    ----------
+    text : str
+        TOML with a ``[program]`` table.
+    source : str
+        Where the text came from, for error messages.
+
+    Returns
+    -------
+    TestProgram
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ProgramError(f"{source}: not valid TOML: {exc}") from None
+    if "program" not in doc:
+        raise ProgramError(f"{source}: no [program] table; see the README for the layout")
+    return program_from_mapping(doc["program"], source)
+
+
+def read_program(path):
+    """Read and validate a program file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.
+
+    Returns
+    -------
+    TestProgram
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ProgramError(f"{path}: program file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProgramError(f"{path}: cannot read the program file: {exc}") from None
+    return parse_program(text, str(path))
+
+
+def default_program():
+    """The paper's test: r = 100 mm, 6000 mm/min, 15 cycles each way, 180 deg overshoot."""
+    return TestProgram()
