@@ -1,0 +1,126 @@
+"""What an axis drive adds at its reversals: backlash, friction spikes, vibration.
+
+Each effect is a function of the time since each reversal of the axis, with
+exact first and second derivatives, added to the axis position. ``d`` is the
+direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
+
+- backlash ``b``: the axis lags the command by ``b/2`` against its direction of
+  motion, taken up smoothly: offset ``-(b/2) D(t)``, where ``D`` steps from the
+  old to the new direction along ``(1 + tanh(t'/tau_b)) / 2``;
+- reversal spike: following-error bump ``-d h u^2 exp(-u)``, ``u = t'/tau_s``,
+  whose acceleration starts at the peak ``2 h / tau_s^2`` and has zero area;
+- structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which
+  starts with zero position and velocity and acceleration ``D omega_d^2``.
+"""
+
+import numpy as np
+
+# Beyond these multiples of their time constants the effects are below 1e-15
+# of their size and are dropped (backlash becomes an exact step).
+_TANH_WINDOW = 20.0
+_SPIKE_WINDOW = 45.0
+_VIBRATION_DECAY = 35.0
+
+
+def _window(t, start, stop):
+    return slice(*np.searchsorted(t, (start, stop), side="left"))
+
+
+def add_backlash(p, t, times, directions, initial, lost_m, take_up_s):
+    """Add backlash to an axis path in place.
+
+    Parameters
+    ----------
+    p : list of 3 ndarray
+        Axis position, velocity, acceleration, modified in place. [m, m/s, m/s^2]
+    t : ndarray, shape (n,)
+        True times, increasing. [s]
+    times, directions : ndarray
+        Reversal times [s] and the direction after each.
+    initial : int
+        Direction before the first reversal.
+    lost_m : float
+        Lost motion b. [m]
+    take_up_s : float
+        Time constant tau_b of the take-up. [s]
+    """
+    if lost_m == 0:
+        return
+    previous = np.concatenate(([initial], directions[:-1])) if len(directions) else []
+    # D(t): the direction steps after each take-up window, smooth inside it
+    steps = np.zeros(len(t) + 1)
+    windows = []
+    for tk, dk, dprev in zip(times, directions, previous, strict=True):
+        sl = _window(t, tk - _TANH_WINDOW * take_up_s, tk + _TANH_WINDOW * take_up_s)
+        steps[sl.stop] += dk - dprev
+        windows.append((sl, tk, dk - dprev))
+    state = initial + np.cumsum(steps[:-1])
+    for sl, tk, jump in windows:
+        th = np.tanh((t[sl] - tk) / take_up_s)
+        sech2 = 1.0 - th * th
+        state[sl] += jump * 0.5 * (1.0 + th)
+        p[1][sl] += -0.5 * lost_m * jump * sech2 / (2.0 * take_up_s)
+        p[2][sl] += -0.5 * lost_m * jump * (-th * sech2 / take_up_s**2)
+    p[0] += -0.5 * lost_m * state
+
+
+def add_spikes(p, t, times, directions, peak_m_s2, tau_s):
+    """Add friction following-error bumps after each reversal, in place.
+
+    Parameters
+    ----------
+    p : list of 3 ndarray
+        Axis position, velocity, acceleration, modified in place.
+    t : ndarray, shape (n,)
+        True times, increasing. [s]
+    times, directions : ndarray
+        Reversal times [s] and the direction after each.
+    peak_m_s2 : float
+        Peak acceleration ``2 h / tau_s^2`` of the bump. [m/s^2]
+    tau_s : float
+        Time constant of the bump. [s]
+    """
+    if peak_m_s2 == 0:
+        return
+    h = 0.5 * peak_m_s2 * tau_s**2
+    for tk, dk in zip(times, directions, strict=True):
+        sl = _window(t, tk, tk + _SPIKE_WINDOW * tau_s)
+        u = (t[sl] - tk) / tau_s
+        e = -dk * h * np.exp(-u)
+        p[0][sl] += e * u * u
+        p[1][sl] += e * (2.0 * u - u * u) / tau_s
+        p[2][sl] += e * (2.0 - 4.0 * u + u * u) / tau_s**2
+
+
+def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
+    """Add a damped oscillation of the axis excited at each reversal, in place.
+
+    Parameters
+    ----------
+    p : list of 3 ndarray
+        Axis position, velocity, acceleration, modified in place.
+    t : ndarray, shape (n,)
+        True times, increasing. [s]
+    times, directions : ndarray
+        Reversal times [s] and the direction after each.
+    accel_m_s2 : float
+        Initial acceleration amplitude ``D omega_d^2``. [m/s^2]
+    frequency_hz : float
+        Natural frequency. [Hz]
+    damping : float
+        Damping ratio, in (0, 1).
+    """
+    if accel_m_s2 == 0:
+        return
+    wn = 2.0 * np.pi * frequency_hz
+    sigma = damping * wn
+    wd = wn * np.sqrt(1.0 - damping**2)
+    amp = accel_m_s2 / wd**2
+    for tk, dk in zip(times, directions, strict=True):
+        sl = _window(t, tk, tk + _VIBRATION_DECAY / sigma)
+        tau = t[sl] - tk
+        e = -dk * amp * np.exp(-sigma * tau)
+        c, s = np.cos(wd * tau), np.sin(wd * tau)
+        p[0][sl] += e * (1.0 - c)
+        p[1][sl] += e * (-sigma + sigma * c + wd * s)
+        p[2][sl] += e * (sigma**2 + (wd**2 - sigma**2) * c - 2.0 * sigma * wd * s)

@@ -1,0 +1,287 @@
+"""The machine description: geometry, drives, feed ramps, tilt; and its TOML file.
+
+A machine file (all sections optional; absent = ideal)::
+
+    [machine]
+    name = "typical"
+    ramp_s = 0.15                 # feed ramp at each block end
+    ramp_profile = "trapezoid"    # or "s_curve" (jerk-limited)
+
+    [geometry]
+    squareness_um_per_m = 15.0    # alpha (E_C0X), + when the XY angle exceeds 90 deg
+    axis_length_mm = [800.0, 800.0]
+    axis_centre_mm = [0.0, 0.0]   # middle of the X and Y travels
+
+    [squareness_drift]
+    rate_um_per_m_per_h = 0.0
+
+    [scale_mismatch]
+    x_um_per_m = 0.0
+    y_um_per_m = 0.0
+
+    [straightness_yaw]            # Chapman Appendix I
+    x_um = 0.0                    # bow S of the X axis (in Y) at the travel ends
+    y_um = 0.0
+    yaw_x = false                 # with the associated yaw
+    yaw_y = false
+
+    [servo_mismatch]
+    tau_x_ms = 0.0                # pure time lag of each axis
+    tau_y_ms = 0.0
+
+    [backlash]
+    x_um = 0.0
+    y_um = 0.0
+    take_up_ms = 5.0
+
+    [reversal_spikes]
+    peak_x_m_s2 = 0.0             # peak of the acceleration bump
+    peak_y_m_s2 = 0.0
+    tau_ms = 20.0
+
+    [structural_vibration]
+    accel_x_m_s2 = 0.0
+    accel_y_m_s2 = 0.0
+    frequency_hz = 40.0
+    damping_ratio = 0.05
+
+    [gravity_coupling]            # carriage tilt leaking g*tilt into a channel
+    x_per_x_urad_per_m = 0.0      # tilt seen by x per metre of X travel
+    x_per_y_urad_per_m = 0.0
+    y_per_x_urad_per_m = 0.0
+    y_per_y_urad_per_m = 0.0
+"""
+
+from dataclasses import dataclass, field
+
+from imu_square.errors import ConfigError
+from imu_square.simulate.config import Sections, load_toml
+from imu_square.simulate.geometry import Geometry
+from imu_square.simulate.trajectory import RAMP_PROFILES
+
+UM = 1e-6
+MS = 1e-3
+HOUR = 3600.0
+
+
+@dataclass(frozen=True)
+class MachineModel:
+    """A machine tool's errors in the XY plane, in SI units. Defaults: an ideal machine.
+
+    Attributes
+    ----------
+    name : str
+        Label written to the recording.
+    geometry : Geometry
+        Squareness (and its drift), scale, straightness and yaw.
+    ramp_s : float
+        Duration of each feed ramp. [s]
+    ramp_profile : str
+        ``"trapezoid"`` or ``"s_curve"``.
+    tau_x_s, tau_y_s : float
+        Servo lag of each axis. [s]
+    backlash_x_m, backlash_y_m : float
+        Lost motion of each axis. [m]
+    backlash_take_up_s : float
+        Time constant of the take-up. [s]
+    spike_x_m_s2, spike_y_m_s2 : float
+        Peak acceleration of the friction bump after a reversal. [m/s^2]
+    spike_tau_s : float
+        Time constant of the bump. [s]
+    vibration_x_m_s2, vibration_y_m_s2 : float
+        Initial acceleration of the oscillation excited at a reversal. [m/s^2]
+    vibration_hz : float
+        Natural frequency of the structure. [Hz]
+    vibration_damping : float
+        Damping ratio.
+    tilt_per_m : tuple of 4 float
+        Gravity coupling: tilt seen by the x channel per metre of X and of Y
+        travel, then by the y channel per metre of X and of Y. [rad/m]
+    """
+
+    name: str = "ideal"
+    geometry: Geometry = field(default_factory=Geometry)
+    ramp_s: float = 0.15
+    ramp_profile: str = "trapezoid"
+    tau_x_s: float = 0.0
+    tau_y_s: float = 0.0
+    backlash_x_m: float = 0.0
+    backlash_y_m: float = 0.0
+    backlash_take_up_s: float = 0.005
+    spike_x_m_s2: float = 0.0
+    spike_y_m_s2: float = 0.0
+    spike_tau_s: float = 0.02
+    vibration_x_m_s2: float = 0.0
+    vibration_y_m_s2: float = 0.0
+    vibration_hz: float = 40.0
+    vibration_damping: float = 0.05
+    tilt_per_m: tuple = (0.0, 0.0, 0.0, 0.0)
+
+    def effects(self):
+        """The named effects that are on, with their parameters (SI), for the truth file.
+
+        Returns
+        -------
+        dict of str to dict
+        """
+        g = self.geometry
+        out = {}
+        if g.squareness_rate_rad_s:
+            out["squareness_drift"] = {"rate_rad_s": g.squareness_rate_rad_s}
+        if g.scale_x or g.scale_y:
+            out["scale_mismatch"] = {"scale_x": g.scale_x, "scale_y": g.scale_y}
+        if g.straightness_x_m or g.straightness_y_m:
+            out["straightness_yaw"] = {
+                "straightness_x_m": g.straightness_x_m,
+                "straightness_y_m": g.straightness_y_m,
+                "length_x_m": g.length_x_m,
+                "length_y_m": g.length_y_m,
+                "axis_centre_m": list(g.axis_centre_m),
+                "yaw_x": g.yaw_x,
+                "yaw_y": g.yaw_y,
+            }
+        if self.tau_x_s or self.tau_y_s:
+            out["servo_mismatch"] = {"tau_x_s": self.tau_x_s, "tau_y_s": self.tau_y_s}
+        if self.backlash_x_m or self.backlash_y_m:
+            out["backlash"] = {
+                "backlash_x_m": self.backlash_x_m,
+                "backlash_y_m": self.backlash_y_m,
+                "take_up_s": self.backlash_take_up_s,
+            }
+        if self.spike_x_m_s2 or self.spike_y_m_s2:
+            out["reversal_spikes"] = {
+                "peak_x_m_s2": self.spike_x_m_s2,
+                "peak_y_m_s2": self.spike_y_m_s2,
+                "tau_s": self.spike_tau_s,
+            }
+        if self.vibration_x_m_s2 or self.vibration_y_m_s2:
+            out["structural_vibration"] = {
+                "accel_x_m_s2": self.vibration_x_m_s2,
+                "accel_y_m_s2": self.vibration_y_m_s2,
+                "frequency_hz": self.vibration_hz,
+                "damping_ratio": self.vibration_damping,
+            }
+        if any(self.tilt_per_m):
+            out["gravity_coupling"] = dict(
+                zip(
+                    ("x_per_x_rad_m", "x_per_y_rad_m", "y_per_x_rad_m", "y_per_y_rad_m"),
+                    self.tilt_per_m,
+                    strict=True,
+                )
+            )
+        return out
+
+
+_LAYOUT = {
+    "machine": {"name": "machine", "ramp_s": 0.15, "ramp_profile": "trapezoid"},
+    "geometry": {
+        "squareness_um_per_m": 0.0,
+        "axis_length_mm": [800.0, 800.0],
+        "axis_centre_mm": [0.0, 0.0],
+    },
+    "squareness_drift": {"rate_um_per_m_per_h": 0.0},
+    "scale_mismatch": {"x_um_per_m": 0.0, "y_um_per_m": 0.0},
+    "straightness_yaw": {"x_um": 0.0, "y_um": 0.0, "yaw_x": False, "yaw_y": False},
+    "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0},
+    "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0},
+    "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0},
+    "structural_vibration": {
+        "accel_x_m_s2": 0.0,
+        "accel_y_m_s2": 0.0,
+        "frequency_hz": 40.0,
+        "damping_ratio": 0.05,
+    },
+    "gravity_coupling": {
+        "x_per_x_urad_per_m": 0.0,
+        "x_per_y_urad_per_m": 0.0,
+        "y_per_x_urad_per_m": 0.0,
+        "y_per_y_urad_per_m": 0.0,
+    },
+}
+
+
+def machine_from_mapping(doc, source="<machine>"):
+    """Validate a parsed machine file and convert it to SI.
+
+    Parameters
+    ----------
+    doc : dict
+        Parsed TOML (see the module docstring for the layout).
+    source : str
+        Where it came from, for messages.
+
+    Returns
+    -------
+    MachineModel
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, section and field, what is allowed and what was received.
+    """
+    s = Sections(doc, source, _LAYOUT)
+    big = 1e6  # um/m, um: anything above 1 mm/m or 1 m is a unit mistake
+    lengths = s.pair("geometry", "axis_length_mm", 1e-3)
+    if min(lengths) <= 0:
+        raw = s.raw("geometry", "axis_length_mm")
+        raise ConfigError(f"{source}: [geometry] axis_length_mm must be positive, got {raw!r}")
+    geometry = Geometry(
+        squareness_rad=s.number("geometry", "squareness_um_per_m", UM, -1e4, 1e4),
+        squareness_rate_rad_s=s.number(
+            "squareness_drift", "rate_um_per_m_per_h", UM / HOUR, -1e4, 1e4
+        ),
+        scale_x=s.number("scale_mismatch", "x_um_per_m", UM, -1e4, 1e4),
+        scale_y=s.number("scale_mismatch", "y_um_per_m", UM, -1e4, 1e4),
+        straightness_x_m=s.number("straightness_yaw", "x_um", UM, -1e3, 1e3),
+        straightness_y_m=s.number("straightness_yaw", "y_um", UM, -1e3, 1e3),
+        length_x_m=lengths[0],
+        length_y_m=lengths[1],
+        axis_centre_m=s.pair("geometry", "axis_centre_mm", 1e-3),
+        yaw_x=s.flag("straightness_yaw", "yaw_x"),
+        yaw_y=s.flag("straightness_yaw", "yaw_y"),
+    )
+    tilt = tuple(
+        s.number("gravity_coupling", key, UM, -big, big)
+        for key in (
+            "x_per_x_urad_per_m",
+            "x_per_y_urad_per_m",
+            "y_per_x_urad_per_m",
+            "y_per_y_urad_per_m",
+        )
+    )
+    return MachineModel(
+        name=s.text("machine", "name"),
+        geometry=geometry,
+        ramp_s=s.number("machine", "ramp_s", 1.0, 0.0, 5.0, lo_open=True),
+        ramp_profile=s.choice("machine", "ramp_profile", RAMP_PROFILES),
+        tau_x_s=s.number("servo_mismatch", "tau_x_ms", MS, 0.0, 1e3),
+        tau_y_s=s.number("servo_mismatch", "tau_y_ms", MS, 0.0, 1e3),
+        backlash_x_m=s.number("backlash", "x_um", UM, 0.0, 1e3),
+        backlash_y_m=s.number("backlash", "y_um", UM, 0.0, 1e3),
+        backlash_take_up_s=s.number("backlash", "take_up_ms", MS, 0.0, 1e3, lo_open=True),
+        spike_x_m_s2=s.number("reversal_spikes", "peak_x_m_s2", 1.0, 0.0, 100.0),
+        spike_y_m_s2=s.number("reversal_spikes", "peak_y_m_s2", 1.0, 0.0, 100.0),
+        spike_tau_s=s.number("reversal_spikes", "tau_ms", MS, 0.0, 1e3, lo_open=True),
+        vibration_x_m_s2=s.number("structural_vibration", "accel_x_m_s2", 1.0, -100.0, 100.0),
+        vibration_y_m_s2=s.number("structural_vibration", "accel_y_m_s2", 1.0, -100.0, 100.0),
+        vibration_hz=s.number("structural_vibration", "frequency_hz", 1.0, 0.0, 1e4, lo_open=True),
+        vibration_damping=s.number(
+            "structural_vibration", "damping_ratio", 1.0, 0.0, 1.0, lo_open=True, hi_open=True
+        ),
+        tilt_per_m=tilt,
+    )
+
+
+def read_machine(path):
+    """Read a machine description file.
+
+    Parameters
+    ----------
+    path : str or Path
+        TOML file; see the module docstring for the layout.
+
+    Returns
+    -------
+    MachineModel
+    """
+    return machine_from_mapping(load_toml(path), str(path))

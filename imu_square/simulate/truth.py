@@ -1,0 +1,126 @@
+"""The ground truth of a simulated run, as written to ``run.truth.json``.
+
+Angles in radians, times on the recording's (sensor's) clock. Quantities that
+drift (squareness drift, the sensor's warm-up) are time means over the
+analysed whole cycles of all blocks, which is what a fit over those cycles
+measures to first order.
+
+Keys:
+
+- ``alpha_rad``: machine squareness (E_C0X); ``beta_rad``: sensor
+  non-orthogonality (E_SC0X); ``squareness_rad = alpha + beta``, what
+  ``theta_y - theta_x`` measures (paper Eq. 4);
+- ``local_squareness_rad``: the squareness a ballbar sees on this circle,
+  from the geometry alone (straightness/yaw included, sensor excluded);
+- ``eps_c_rad``: sensor mounting rotation; ``carriage_yaw_rad``: the
+  carriage's yaw at the circle centre (associated yaw), which adds to it;
+- ``servo_mismatch_rad = omega (tau_y - tau_x)``;
+- ``gravity_phase_rad``: the apparent ``theta_y - theta_x`` that gravity
+  coupling adds (position-angle domain, the same in both directions);
+- ``omega_rad_s``, ``amplitude_m_s2 = v^2/r``, ``sample_rate_hz``,
+  ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``;
+- ``effects``: the named effects that are on, with their parameters (SI);
+- ``seed``, ``program`` (file units), ``n_samples``, ``t0_ns``;
+- ``blocks``: per block ``index``, ``direction``, true motion ``start_ns`` /
+  ``end_ns`` (recording clock) and ``start_s`` / ``end_s`` from the first
+  sample, and ``analysed_start_s`` / ``analysed_end_s`` (the whole cycles
+  between the overshoots);
+- ``reversal_times_s``: ``{"x": [...], "y": [...]}``, when each actual axis
+  reverses (servo lag included), from the first sample.
+"""
+
+import math
+
+import numpy as np
+
+from imu_square.simulate.sensor import G
+
+
+def _gravity_phases(program, machine):
+    """Apparent theta_x, theta_y from the position-dependent tilt (position-angle domain)."""
+    kxx, kxy, kyx, kyy = machine.tilt_per_m
+    r, a = program.radius_m, program.centripetal_m_s2
+    theta_x = -math.atan2(G * kxy * r, a - G * kxx * r)
+    theta_y = math.atan2(G * kyx * r, a - G * kyy * r)
+    return theta_x, theta_y
+
+
+def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
+    """The truth dictionary of one run.
+
+    Parameters
+    ----------
+    program : TestProgram
+        The program that ran.
+    machine : MachineModel
+        The machine.
+    sensor : SensorModel
+        The sensor.
+    timeline : Timeline
+        The true timeline of the run.
+    seed : int
+        Seed of the noise.
+    clock_factor : float
+        Sensor clock time per true time, ``1 + ppm * 1e-6``.
+    t0_ns : int
+        Recording time of the first sample. [ns]
+
+    Returns
+    -------
+    dict
+        JSON-serialisable.
+    """
+    geometry = machine.geometry
+    windows = timeline.analysed_windows()
+    durations = np.array([b - a for a, b in windows])
+    mids = np.array([0.5 * (a + b) for a, b in windows])
+    t_mean = float(np.sum(mids * durations) / np.sum(durations))
+    alpha = float(geometry.squareness_at(t_mean))
+    beta = float(
+        sum(sensor.mean_beta(a, b) * (b - a) for a, b in windows) / float(np.sum(durations))
+    )
+    cx, cy = program.centre_m
+    omega = program.omega_rad_s
+    theta_gx, theta_gy = _gravity_phases(program, machine)
+    blocks = []
+    for b, (a0, a1) in zip(timeline.blocks, windows, strict=True):
+        start, end = b.t_start_s * clock_factor, b.t_end_s * clock_factor
+        blocks.append(
+            {
+                "index": b.index,
+                "direction": b.direction,
+                "start_ns": t0_ns + round(start * 1e9),
+                "end_ns": t0_ns + round(end * 1e9),
+                "start_s": start,
+                "end_s": end,
+                "analysed_start_s": a0 * clock_factor,
+                "analysed_end_s": a1 * clock_factor,
+            }
+        )
+    effects = {**machine.effects(), **sensor.effects()}
+    reversals = {}
+    for axis, name, tau in ((0, "x", machine.tau_x_s), (1, "y", machine.tau_y_s)):
+        times, _, _ = timeline.reversals(axis)
+        reversals[name] = [(t + tau) * clock_factor for t in times]
+    return {
+        "alpha_rad": alpha,
+        "beta_rad": beta,
+        "squareness_rad": alpha + beta,
+        "local_squareness_rad": float(geometry.local_squareness(cx, cy, t_mean)) + 0.0,
+        "eps_c_rad": sensor.eps_c_rad,
+        "carriage_yaw_rad": float(geometry.carriage_yaw(cx, cy)),
+        "servo_mismatch_rad": omega * (machine.tau_y_s - machine.tau_x_s),
+        "gravity_phase_rad": theta_gy - theta_gx,
+        "omega_rad_s": omega,
+        "amplitude_m_s2": program.centripetal_m_s2,
+        "sample_rate_hz": sensor.sample_rate_hz,
+        "clock_ppm": sensor.clock_ppm,
+        "noise_density_m_s2_rthz": sensor.noise_density_m_s2_rthz,
+        "ramp_s": machine.ramp_s,
+        "ramp_profile": machine.ramp_profile,
+        "effects": effects,
+        "seed": seed,
+        "program": program.to_mapping(),
+        "blocks": blocks,
+        "reversal_times_s": reversals,
+    }

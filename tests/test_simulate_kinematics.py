@@ -1,0 +1,178 @@
+"""Exact derivatives and the timeline: ramps, reversals, drive effects.
+
+The one place where positions are differenced: as a test of the analytic
+velocity and acceleration, with a 9-point (8th-order) central stencil on a
+fine grid. With h = 0.2 ms the stencil's rounding error is ~2e-8 m/s^2 (the
+position angle reaches ~20 rad, whose last bit is 4e-15 rad, i.e. 2e-16 m on a
+50 mm circle, times sum|c| / h^2 = 6.4 / 4e-8) and its truncation error far
+below that for the 40 Hz vibration and the 5 ms backlash take-up. Points
+within a few h of a kink (reversal onsets of the spike and the vibration, ramp
+breakpoints) are left out.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from imu_square.program import TestProgram
+from imu_square.simulate import MachineModel, chapman_machine, simulate_run
+from imu_square.simulate.geometry import Geometry
+from imu_square.simulate.kinematics import carriage_motion
+from imu_square.simulate.trajectory import build_timeline, ramp_fraction
+
+PROGRAM = TestProgram(radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=2, dwell_s=0.3)
+
+# 8th-order central differences
+D1 = np.array([1 / 280, -4 / 105, 1 / 5, -4 / 5, 0, 4 / 5, -1 / 5, 4 / 105, -1 / 280])
+D2 = np.array([-1 / 560, 8 / 315, -1 / 5, 8 / 5, -205 / 72, 8 / 5, -1 / 5, 8 / 315, -1 / 560])
+
+ALL_DRIVE = MachineModel(
+    geometry=Geometry(
+        squareness_rad=15e-6,
+        squareness_rate_rad_s=1e-6,
+        scale_x=20e-6,
+        scale_y=-10e-6,
+        straightness_x_m=10e-6,
+        straightness_y_m=8e-6,
+        axis_centre_m=(-0.1, 0.05),
+        yaw_x=True,
+        yaw_y=True,
+    ),
+    ramp_profile="s_curve",
+    tau_x_s=2e-3,
+    tau_y_s=3e-3,
+    backlash_x_m=5e-6,
+    backlash_y_m=4e-6,
+    spike_x_m_s2=0.02,
+    spike_y_m_s2=0.015,
+    vibration_x_m_s2=0.01,
+    vibration_y_m_s2=0.02,
+)
+
+
+def breakpoints(timeline, machine):
+    points = []
+    for b in timeline.blocks:
+        for tk in (b.t_start_s, b.t_end_s):
+            for axis_tau in (machine.tau_x_s, machine.tau_y_s):
+                for frac in (0.0, 0.5, 1.0):
+                    points += [tk + axis_tau + frac * b.ramp_s, tk + axis_tau - frac * b.ramp_s]
+    for axis, tau in ((0, machine.tau_x_s), (1, machine.tau_y_s)):
+        times, _, _ = timeline.reversals(axis)
+        points += list(times + tau)
+    return np.array(points)
+
+
+@pytest.mark.parametrize("machine", [MachineModel(), ALL_DRIVE], ids=["ideal", "all-effects"])
+def test_analytic_derivatives_match_finite_differences(machine):
+    timeline = build_timeline(PROGRAM, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
+    h = 2e-4
+    t = np.arange(0.0, timeline.duration_s, h)
+    pos, vel, acc = carriage_motion(timeline, machine, t)
+    keep = np.ones(len(t), bool)
+    for tb in breakpoints(timeline, machine):
+        keep[np.abs(t - tb) < 6 * h] = False
+    keep[:4] = keep[-4:] = False
+    inner = keep[4:-4]
+    for k in range(2):
+        d1 = np.convolve(pos[:, k], D1[::-1], mode="valid") / h
+        d2 = np.convolve(pos[:, k], D2[::-1], mode="valid") / h**2
+        assert_allclose(d1[inner], vel[4:-4, k][inner], rtol=0, atol=2e-11)
+        assert_allclose(d2[inner], acc[4:-4, k][inner], rtol=0, atol=4e-8)
+    # the kinks really are few: most points are checked
+    assert keep.mean() > 0.97
+
+
+@pytest.mark.parametrize("profile", ["trapezoid", "s_curve"])
+def test_ramp_profiles_integrate_consistently(profile):
+    u = np.linspace(0, 1, 2001)
+    F, f, df = ramp_fraction(u, profile)
+    assert_allclose(F[-1], 0.5, rtol=1e-15)
+    assert_allclose(f[[0, -1]], [0.0, 1.0], atol=1e-15)
+    # F' = f and f' = df, by the trapezoidal rule / central differences
+    assert_allclose(np.diff(F), 0.5 * (f[1:] + f[:-1]) * np.diff(u), atol=1e-10)
+    assert_allclose(np.gradient(f, u)[1:-1], df[1:-1], atol=2e-3)
+
+
+@pytest.mark.parametrize("profile", ["trapezoid", "s_curve"])
+def test_block_timing_and_mirror_symmetry(profile):
+    timeline = build_timeline(PROGRAM, 0.15, profile, 3.0, 3.0)
+    b = timeline.blocks[0]
+    assert_allclose(b.duration_s, PROGRAM.block_duration_s + 0.15, rtol=1e-15)
+    assert timeline.blocks[1].t_start_s == pytest.approx(b.t_end_s + 0.3, rel=1e-15)
+    assert_allclose(timeline.duration_s, 3.0 + 2 * b.duration_s + 0.3 + 3.0, rtol=1e-15)
+    tau = np.linspace(0.0, b.duration_s, 1001)
+    s, ds, dds = b.progress(b.t_start_s + tau)
+    s_rev, ds_rev, dds_rev = b.progress(b.t_end_s - tau)
+    assert_allclose(s + s_rev, b.angle_rad, rtol=1e-13)
+    assert_allclose(ds, ds_rev, rtol=1e-12, atol=1e-15)
+    assert_allclose(dds, -dds_rev, rtol=1e-9, atol=1e-12)
+    # the middle of the motion maps to half the block angle (the eps_c anchor)
+    mid, _, _ = b.progress(np.array([0.5 * (b.t_start_s + b.t_end_s)]))
+    assert_allclose(mid, 0.5 * b.angle_rad, rtol=1e-14)
+    # time_at_progress inverts progress, ramps included
+    for q in (0.0, 0.001, 0.05, 1.0, b.angle_rad - 0.002, b.angle_rad):
+        tq = b.time_at_progress(q)
+        assert_allclose(b.progress(np.array([tq]))[0], q, atol=1e-12)
+
+
+def test_reversals_on_the_ramped_timeline():
+    program = TestProgram(radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=2, dwell_s=0.3)
+    timeline = build_timeline(program, 0.15, "trapezoid", 1.0, 1.0)
+    t = np.arange(0.0, timeline.duration_s, 1e-4)
+    for axis in (0, 1):
+        times, dirs, initial = timeline.reversals(axis)
+        _, v, _ = timeline.axis_path(t, axis)
+        # the velocity has the announced direction between reversals
+        edges = np.concatenate(([0.0], times, [timeline.duration_s]))
+        for k, d in enumerate(np.concatenate(([initial], dirs))):
+            m = (t > edges[k] + 1e-3) & (t < edges[k + 1] - 1e-3) & (np.abs(v) > 1e-9)
+            assert np.all(np.sign(v[m]) == d)
+        assert np.all(np.diff(dirs) != 0)
+    # X starts at phi = 0 moving to -x, reverses at phi = pi (t = lead-in + ramp/2 + pi/omega)
+    times, dirs, initial = timeline.reversals(0)
+    assert initial == -1
+    assert_allclose(times[0], 1.0 + 0.075 + math.pi, rtol=1e-14)
+    assert dirs[0] == 1
+
+
+def test_reversal_spike_peak_and_backlash_size():
+    machine = MachineModel(spike_x_m_s2=0.02, backlash_y_m=6e-6)
+    timeline = build_timeline(PROGRAM, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
+    t = np.arange(0.0, timeline.duration_s, 1e-4)
+    _, _, acc0 = carriage_motion(timeline, MachineModel(), t)
+    pos, vel, acc = carriage_motion(timeline, machine, t)
+    pos0, vel0, _ = carriage_motion(timeline, MachineModel(), t)
+    bump = acc[:, 0] - acc0[:, 0]
+    times, dirs, _ = timeline.reversals(0)
+    # 5 inside each block (phi = pi .. 5 pi) and one at the start of the CW block
+    assert len(times) == 11
+    for tk, dk in zip(times, dirs, strict=True):
+        i = np.searchsorted(t, tk)
+        # 2 h / tau^2 (1 - 2u + u^2/2) e^-u just after the reversal
+        u = (t[i] - tk) / 0.02
+        assert_allclose(bump[i], -dk * 0.02 * (1 - 2 * u + 0.5 * u * u) * math.exp(-u), rtol=1e-9)
+        # the bump has zero area: no net velocity change 1 s (50 tau) later
+        j = np.searchsorted(t, tk + 1.0)
+        assert abs(vel[j, 0] - vel0[j, 0]) < 1e-15
+    lag = pos[:, 1] - pos0[:, 1]
+    # y lags its motion by b/2: while moving +y the offset is -3 um
+    _, v, _ = timeline.axis_path(t, 1)
+    far = np.ones(len(t), bool)
+    for tk in timeline.reversals(1)[0]:
+        far[np.abs(t - tk) < 0.2] = False
+    moving = far & (np.abs(v) > 1e-3)
+    assert_allclose(lag[moving], -3e-6 * np.sign(v[moving]), rtol=1e-9)
+
+
+def test_chapman_yaw_rotates_the_sensor_with_the_carriage():
+    g = chapman_machine(3)
+    assert_allclose(g.carriage_yaw(np.array([-0.4, 0.4]), 0.0), [-50e-6, 50e-6], rtol=1e-12)
+    program = TestProgram(
+        radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=2, dwell_s=0.3, centre_m=(0.2, 0.0)
+    )
+    _, truth = simulate_run(program, MachineModel(geometry=g), seed=0, lead_in_s=0.5)
+    assert_allclose(truth["carriage_yaw_rad"], 25e-6, rtol=1e-12)
+    assert_allclose(truth["local_squareness_rad"], 15e-6, rtol=1e-12)
