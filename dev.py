@@ -25,7 +25,7 @@ STAMP = VENV / ".imu-square-installed"
 
 
 def _ensure_env():
-    if sys.version_info < (3, 11):
+    if sys.version_info < (3, 11):  # noqa: UP036 -- dev.py may be run by an older python3
         sys.exit(f"dev.py: imu-square needs Python 3.11 or later, this is {sys.version.split()[0]}")
     digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
     if STAMP.exists() and STAMP.read_text() == digest:

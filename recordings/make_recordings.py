@@ -23,13 +23,26 @@ RECORDINGS = {
         "+20 um/m squareness only; the sensor adds 10 urad of its own non-orthogonality",
     ),
     "typical_machine": (
-        ["--effects", "servo_mismatch,backlash,reversal_spikes,structural_vibration",
-         "--machine", CONFIG / "machine_square.toml", "--seed", "2"],
+        [
+            "--effects",
+            "servo_mismatch,backlash,reversal_spikes,structural_vibration",
+            "--machine",
+            CONFIG / "machine_square.toml",
+            "--seed",
+            "2",
+        ],
         "the same machine with servo mismatch, backlash, reversal spikes and vibration",
     ),
     "gravity_no_events": (
-        ["--effects", "gravity_coupling", "--machine", CONFIG / "machine_square.toml",
-         "--no-events", "--seed", "3"],
+        [
+            "--effects",
+            "gravity_coupling",
+            "--machine",
+            CONFIG / "machine_square.toml",
+            "--no-events",
+            "--seed",
+            "3",
+        ],
         "gravity coupling (biased by design) and no block events: segmentation from the signal",
     ),
 }
@@ -40,9 +53,12 @@ def make_all():
     for name, (extra, _) in RECORDINGS.items():
         argv = [
             "simulate",
-            "--program", str(CONFIG / "program_short.toml"),
-            "--sensor", str(CONFIG / "sensor_adxl355_500hz.toml"),
-            "-o", str(HERE / f"{name}.mcap"),
+            "--program",
+            str(CONFIG / "program_short.toml"),
+            "--sensor",
+            str(CONFIG / "sensor_adxl355_500hz.toml"),
+            "-o",
+            str(HERE / f"{name}.mcap"),
             *map(str, extra),
         ]
         code = main(argv)

@@ -1,0 +1,72 @@
+"""``imu-square info``: what an MCAP recording holds."""
+
+import json
+
+from imu_square.mcap_io import scan_mcap, summarize
+
+
+def register(sub):
+    """Add the ``info`` subcommand."""
+    p = sub.add_parser("info", help="summarise an MCAP recording")
+    p.add_argument("recording", help="MCAP file")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def _text(path, summary):
+    s = summary
+    lines = [
+        f"{path}: {'complete' if s['file']['complete'] else 'INCOMPLETE: ' + s['file']['problem']}",
+        f"  samples    {s['samples']} over {s['duration_s']:.3f} s at {s['sample_rate_hz']:.6g} Hz"
+        f" (dt {s['dt_ns']} ns)",
+        f"  gaps       {s['gaps']['count']} ({s['gaps']['lost']} samples lost)",
+        f"  channels   {', '.join(s['channels'])}",
+        "  messages   "
+        + ", ".join(f"{topic} {n}" for topic, n in sorted(s["file"]["messages"].items())),
+    ]
+    prog = s["program"]
+    if prog is None:
+        lines.append("  program    none")
+    else:
+        lines.append(
+            f"  program    r={prog['radius_mm']:g} mm, v={prog['feed_mm_per_min']:g} mm/min, "
+            f"{prog['cycles_per_direction']} cycles x {prog['n_blocks']} blocks "
+            f"({' '.join(prog['order'])} x {prog['runs']}), period {prog['period_s']:.3f} s, "
+            f"{prog['duration_s']:.1f} s"
+        )
+    sensor = s["sensor"]
+    lines.append(
+        f"  sensor     {sensor['model']}"
+        + (f" #{sensor['serial']}" if sensor["serial"] else "")
+        + (
+            f", noise {sensor['noise_density_m_s2_rthz'] * 1e6 / 9.80665:.3g} ug/rtHz"
+            if sensor["noise_density_m_s2_rthz"] is not None
+            else ""
+        )
+    )
+    lines.append(f"  machine    {s['machine_id'] or '(not given)'}")
+    events = s["events"]
+    lines.append(
+        "  events     " + (", ".join(f"{k} {n}" for k, n in events.items()) if events else "none")
+    )
+    return "\n".join(lines)
+
+
+def run(args):
+    """Print the summary of one recording on stdout."""
+    contents = scan_mcap(args.recording)
+    summary = summarize(contents.recording)
+    report = contents.report
+    summary["file"] = {
+        "path": args.recording,
+        "bytes": report.file_bytes,
+        "complete": report.complete,
+        "problem": contents.problem,
+        "cut_at_byte": report.cut_at_byte,
+        "messages": contents.channel_counts,
+    }
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(_text(args.recording, summary))
+    return 0

@@ -1,0 +1,142 @@
+"""End to end through the CLI: import a CSV, inspect the MCAP, recover a cut one."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imu_square.cli import main
+from imu_square.mcap_io import RecordingWriter, read_mcap
+from imu_square.recording import Event
+
+REAL = Path("/work/shared/realdata")
+KLIPPER = REAL / "beattune-core__shaketune-cli-docker__raw_data_x_lis2dw_20260423_171429.HEAD50.csv"
+PHONE = REAL / "Inkering__printnoser__rectangle_1__accel.csv"
+PROGRAM = """\
+[program]
+radius_mm = 100.0
+feed_mm_per_min = 6000.0
+cycles_per_direction = 15
+"""
+
+
+@pytest.fixture
+def program(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text(PROGRAM)
+    return str(path)
+
+
+def _csv(tmp_path, n=2000, skip=(500, 501)):
+    lines = ["time_s,accel_x,accel_y,accel_z"]
+    for k in range(n):
+        if k not in skip:
+            lines.append(f"{k / 1000:.3f},0.01,-0.02,{9.80665 + 0.001 * (k % 5):.5f}")
+    path = tmp_path / "data.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+def test_import_then_info(tmp_path, program, capsys):
+    out = str(tmp_path / "run.mcap")
+    code = main(["import", _csv(tmp_path), "--program", program, "-o", out, "--machine-id", "VF2"])
+    captured = capsys.readouterr()
+    assert code == 0 and captured.out == ""
+    assert captured.err.strip() == (
+        f"imported 1998 samples (1.999 s at 1000 Hz, 1 gaps, 2 lost) from "
+        f"{tmp_path / 'data.csv'} to {out}"
+    )
+
+    assert main(["info", out]) == 0
+    text = capsys.readouterr().out
+    assert f"{out}: complete" in text
+    assert "samples    1998 over 1.999 s at 1000 Hz (dt 1000000 ns)" in text
+    assert "gaps       1 (2 samples lost)" in text
+    assert "/imu/accel 20, /imu/preview 200, /test/events 1" in text
+    assert "program    r=100 mm, v=6000 mm/min, 15 cycles x 2 blocks" in text
+    assert "machine    VF2" in text and "events     gap 1" in text
+
+    assert main(["info", out, "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["samples"] == 1998 and info["gaps"] == {"count": 1, "lost": 2}
+    assert info["file"]["complete"] is True
+    assert info["file"]["messages"] == {"/imu/accel": 20, "/imu/preview": 200, "/test/events": 1}
+    assert info["program"]["radius_mm"] == 100.0 and info["machine_id"] == "VF2"
+
+
+def test_import_refuses_wrong_units_in_one_line(tmp_path, program, capsys):
+    path = tmp_path / "mm.csv"
+    path.write_text("time_s,accel_x,accel_y,accel_z\n0,0,0,9806\n0.001,0,0,9807\n")
+    code = main(["import", str(path), "--program", program, "-o", str(tmp_path / "x.mcap")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "looks like mm/s^2, but format 'imu-square' expects m/s^2; use --format klipper" in err
+    assert not (tmp_path / "x.mcap").exists()
+
+
+@pytest.mark.skipif(not KLIPPER.exists(), reason="real Klipper fixture not available")
+def test_import_real_klipper_capture(tmp_path, program, capsys):
+    out = str(tmp_path / "klipper.mcap")
+    assert (
+        main(["import", str(KLIPPER), "--program", program, "-o", out, "--format", "klipper"]) == 0
+    )
+    assert "imported 50 samples" in capsys.readouterr().err
+    rec = read_mcap(out)
+    assert rec.time_ns[0] == 76_666_231_000 and rec.dt_ns == 623_000
+    np.testing.assert_allclose(rec.accel[0, 2], 9.762716208, rtol=1e-7)
+
+
+@pytest.mark.skipif(not PHONE.exists(), reason="real phone recording not available")
+def test_import_real_phone_recording_as_a_user_would(tmp_path, program, capsys):
+    out = str(tmp_path / "phone.mcap")
+    assert main(["import", str(PHONE), "--program", program, "-o", out]) == 2
+    assert "--columns" in capsys.readouterr().err
+    columns = "t_s,ax_mps2,ay_mps2,az_mps2"
+    assert main(["import", str(PHONE), "--program", program, "-o", out, "--columns", columns]) == 0
+    assert "imported 3145 samples (31.368 s at 100 Hz" in capsys.readouterr().err
+
+
+def test_recover_a_cut_recording(tmp_path, capsys):
+    whole = tmp_path / "whole.mcap"
+    n = 6000
+    t = 5_000_000_000 + np.arange(n) * 1_000_000
+    with RecordingWriter(whole, dt_ns=1_000_000, chunk_size=8192) as w:
+        w.write_event(Event(int(t[10]), "block_start", "ccw", 0))
+        w.write_samples(np.arange(n), t, np.tile([0.0, 0.0, 9.8], (n, 1)))
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    fixed = tmp_path / "fixed.mcap"
+
+    assert main(["info", str(cut)]) == 0
+    assert "INCOMPLETE: it ends in the middle of a record" in capsys.readouterr().out
+
+    assert main(["recover", str(cut), "-o", str(fixed)]) == 0
+    err = capsys.readouterr().err
+    rec = read_mcap(fixed)  # whole again: no warning
+    assert 0 < rec.n_samples < n
+    assert err.startswith(
+        f"recovered {rec.n_samples} samples ({rec.duration_s:.3f} s) and 1 events; "
+        f"the file was cut at byte "
+    )
+    assert f" of {len(data) // 2}, after time {t[rec.n_samples - 1] * 1e-9:.3f} s" in err
+
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(data[:100])
+    assert main(["recover", str(garbage), "-o", str(tmp_path / "none.mcap")]) == 2
+    assert "no complete samples" in capsys.readouterr().err
+
+
+def test_installed_script_prints_json(tmp_path, program):
+    out = tmp_path / "run.mcap"
+    assert (
+        main(["import", _csv(tmp_path, n=300, skip=()), "--program", program, "-o", str(out)]) == 0
+    )
+    script = Path(sys.executable).with_name("imu-square")
+    result = subprocess.run(
+        [str(script), "info", str(out), "--json"], capture_output=True, text=True, check=True
+    )
+    assert json.loads(result.stdout)["samples"] == 300
