@@ -140,13 +140,14 @@ class Recording:
         if int(self.dt_ns) <= 0:
             raise RecordingError(f"dt_ns must be a positive integer, got {self.dt_ns!r}")
         self.dt_ns = int(self.dt_ns)
-        if n > 1:
-            if np.any(np.diff(self.time_ns) <= 0):
-                i = int(np.argmax(np.diff(self.time_ns) <= 0))
-                raise RecordingError(f"time_ns is not strictly increasing at sample {i + 1}")
-            if np.any(np.diff(self.seq) <= 0):
-                i = int(np.argmax(np.diff(self.seq) <= 0))
-                raise RecordingError(f"seq is not strictly increasing at sample {i + 1}")
+        for name in ("time_ns", "seq"):
+            values = getattr(self, name)
+            # A boolean comparison, not np.diff: reading stays within 3x the sample array.
+            bad = values[1:] <= values[:-1]
+            if bad.any():
+                raise RecordingError(
+                    f"{name} is not strictly increasing at sample {int(np.argmax(bad)) + 1}"
+                )
         if self.temperature_c is not None:
             self.temperature_c = np.asarray(self.temperature_c, dtype=np.float64)
             if self.temperature_c.shape != (n,):

@@ -55,6 +55,8 @@ def test_import_then_info(tmp_path, program, capsys):
     assert f"{out}: complete" in text
     assert "samples    1998 over 1.999 s at 1000 Hz (dt 1000000 ns)" in text
     assert "gaps       1 (2 samples lost)" in text
+    # 500 samples before the gap (5 batches of 100, 50 previews of 10 samples), 1498 after
+    # (14 batches of 100 and one of 98, 150 previews); one gap event.
     assert "/imu/accel 20, /imu/preview 200, /test/events 1" in text
     assert "program    r=100 mm, v=6000 mm/min, 15 cycles x 2 blocks" in text
     assert "machine    VF2" in text and "events     gap 1" in text
@@ -112,7 +114,9 @@ def test_recover_a_cut_recording(tmp_path, capsys):
     fixed = tmp_path / "fixed.mcap"
 
     assert main(["info", str(cut)]) == 0
-    assert "INCOMPLETE: it ends in the middle of a record" in capsys.readouterr().out
+    assert (
+        "INCOMPLETE: it ends in the middle of a record; read up to byte" in capsys.readouterr().out
+    )
 
     assert main(["recover", str(cut), "-o", str(fixed)]) == 0
     err = capsys.readouterr().err

@@ -15,8 +15,14 @@ def register(sub):
 
 def _text(path, summary):
     s = summary
+    f = s["file"]
+    state = (
+        "complete"
+        if f["complete"]
+        else f"INCOMPLETE: {f['problem']}; read up to byte {f['cut_at_byte']} of {f['bytes']}"
+    )
     lines = [
-        f"{path}: {'complete' if s['file']['complete'] else 'INCOMPLETE: ' + s['file']['problem']}",
+        f"{path}: {state}",
         f"  samples    {s['samples']} over {s['duration_s']:.3f} s at {s['sample_rate_hz']:.6g} Hz"
         f" (dt {s['dt_ns']} ns)",
         f"  gaps       {s['gaps']['count']} ({s['gaps']['lost']} samples lost)",
