@@ -20,9 +20,9 @@ RADIUS_TOLERANCE_MM = 0.005
 
 _WORD = re.compile(r"([A-Z])([-+]?(?:\d+\.?\d*|\.\d+))")
 _PREAMBLE_G = {
-    "linuxcnc": {"G21", "G17", "G90", "G91.1", "G94", "G40", "G49", "G80"},
-    "fanuc": {"G21", "G17", "G90", "G94", "G40", "G49", "G80"},
-    "sinumerik": {"G71", "G17", "G90", "G94", "G40"},
+    "linuxcnc": {"G21", "G17", "G90", "G91.1", "G94", "G40", "G49", "G80", "G64"},
+    "fanuc": {"G21", "G17", "G90", "G94", "G40", "G49", "G80", "G64"},
+    "sinumerik": {"G71", "G17", "G90", "G94", "G40", "G64"},
 }
 _METRIC = {"linuxcnc": "G21", "fanuc": "G21", "sinumerik": "G71"}
 _DWELL_WORD = {"linuxcnc": "P", "fanuc": "X", "sinumerik": "F"}
@@ -142,9 +142,10 @@ def parse_nc(text, dialect):
     Raises
     ------
     ProgramError
-        On anything outside the subset, a motion before the units, plane and
-        absolute mode are set, an arc whose end radius differs from its start
-        radius, a missing feed, or code after the program end.
+        On anything outside the subset, a motion before the units, plane,
+        absolute mode and continuous-path mode (G64) are set, an arc whose
+        end radius differs from its start radius, a missing feed, or code
+        after the program end.
     """
     if dialect not in DIALECTS:
         raise ProgramError(f"dialect must be one of {DIALECTS!r}, got {dialect!r}")
@@ -203,7 +204,7 @@ def parse_nc(text, dialect):
                 _fail(line_no, line, f"{dialect} dwell is 'G4 {word}<seconds>' alone")
             trace.events.append(NcEvent("dwell", line_no, value=float(values[word])))
             continue
-        missing = {_METRIC[dialect], "G17", "G90"} - modes
+        missing = {_METRIC[dialect], "G17", "G90", "G64"} - modes
         if missing:
             _fail(line_no, line, f"motion before {sorted(missing)} is set")
         if "F" in values:

@@ -2,17 +2,25 @@
 
 The generated program is the nightly warm-up cycle of a :class:`TestProgram`:
 
-1. a preamble that fixes units (mm), plane (XY), absolute positions and
-   feed per minute;
+1. a preamble that fixes units (mm), plane (XY), absolute positions, feed
+   per minute and continuous-path mode (G64: a control's reset default may
+   be exact stop, e.g. G60 on a Sinumerik, which would stop the axes at the
+   end of every 360 degree arc);
 2. an approach: a rapid move to a point ``approach_mm`` inside the circle on
-   the start radius, then a feed move onto the start point;
+   the start radius, a feed move onto the start point, and a dwell of
+   ``max(program.dwell_s, START_DWELL_S)``, so that block 0 starts from rest
+   at its start angle instead of blending the 90 degree corner into the
+   first arc (the ``eps_c`` anchor relies on the block starting from rest);
 3. every block of ``program.blocks()`` as circular arcs around
    ``program.centre_m`` (G3 for CCW, G2 for CW, centre given by incremental
    I/J), travelling ``overshoot + cycles * 360 + overshoot`` degrees;
 4. a dwell of ``program.dwell_s`` between blocks;
 5. markers: a comment naming block index, run and direction at the start and
    the end of each block and, if asked, a user M-code at both places, which
-   an acquisition trigger can use;
+   an acquisition trigger can use (on LinuxCNC, a user M-code M100-M199 runs
+   an executable file of that name found in the user M-code path,
+   ``[RS274NGC] USER_M_PATH`` or the program directory; the control stops
+   with an error if it is missing);
 6. the program end.
 
 Each block is written as an arc of ``180 + overshoot`` degrees, then
@@ -33,12 +41,20 @@ fanuc       G21         G4 X<seconds>   ``(...)``     M30, ``%``
 sinumerik   G71         G4 F<seconds>   ``; ...``     M30
 =========== =========== =============== ============= ============
 
+All three read a plain ``G64`` as continuous-path mode (LinuxCNC: blend at
+the best possible speed; Fanuc: cutting mode; Sinumerik: continuous-path
+mode). Inside a block every arc joins the next tangentially, so no blending
+tolerance is needed; LinuxCNC's ``G64 P<tol>`` is not used because very
+small tolerances are known to make its planner exceed the acceleration
+limits (LinuxCNC issue #546).
+
 References
 ----------
 .. [1] LinuxCNC G-code reference: G2/G3 (full circle when end equals start,
    I/J incremental in the default G91.1), G4 P seconds, M50 P0.
 .. [2] Fanuc Series 0i-MF operator's manual: G02/G03 with I/J, G04 X/P.
-.. [3] Siemens SINUMERIK 840D sl programming manual: G2/G3, G4 F<s>, G71.
+.. [3] Siemens SINUMERIK 840D sl programming manual: G2/G3, G4 F<s>, G71,
+   G60/G64.
 """
 
 import math
@@ -54,13 +70,16 @@ COORD_DECIMALS = 3
 # The rapid move stops this far inside the circle; the rest is a feed move. [mm]
 DEFAULT_APPROACH_MM = 5.0
 
+# Shortest rest at the start point before block 0. [s]
+START_DWELL_S = 0.5
+
 # M-codes with a standard meaning that a marker must not reuse.
 _RESERVED_MCODES = frozenset({0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 17, 19, 30, 98, 99})
 
 _PREAMBLE = {
-    "linuxcnc": ["G21 G17 G90 G91.1 G94 G40 G49 G80"],
-    "fanuc": ["G21 G17 G90 G94 G40 G49 G80"],
-    "sinumerik": ["G71 G17 G90 G94 G40"],
+    "linuxcnc": ["G21 G17 G90 G91.1 G94 G40 G49 G80 G64"],
+    "fanuc": ["G21 G17 G90 G94 G40 G49 G80 G64"],
+    "sinumerik": ["G71 G17 G90 G94 G40 G64"],
 }
 _END = {"linuxcnc": ["M2"], "fanuc": ["M30", "%"], "sinumerik": ["M30"]}
 
@@ -212,6 +231,14 @@ def generate_nc(program, dialect, marker_mcode=None, feed_override_safe=False, a
             f"CENTRE X{cx_mm:g} Y{cy_mm:g} - SET Z TO A SAFE HEIGHT BEFORE START",
         )
     )
+    if marker_mcode is not None and dialect == "linuxcnc":
+        lines.append(
+            _comment(
+                dialect,
+                f"M{marker_mcode} RUNS AN EXECUTABLE FILE NAMED M{marker_mcode} THAT MUST BE "
+                "IN THE USER M-CODE PATH - RS274NGC USER_M_PATH OR THE PROGRAM DIRECTORY",
+            )
+        )
     lines += _PREAMBLE[dialect]
 
     start = program.start_angle_rad
@@ -221,6 +248,7 @@ def generate_nc(program, dialect, marker_mcode=None, feed_override_safe=False, a
     x, y = _point_mm(program, start)
     lines.append(f"G0 X{ax} Y{ay}")
     lines.append(f"G1 X{x} Y{y} {feed}")
+    lines.append(_dwell(dialect, max(program.dwell_s, START_DWELL_S)))
     if feed_override_safe:
         lines.append("M50 P0")
 

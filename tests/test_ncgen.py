@@ -14,7 +14,13 @@ from hypothesis import strategies as st
 from imu_square.cli import main
 from imu_square.errors import ProgramError
 from imu_square.gcode_check import RADIUS_TOLERANCE_MM, parse_nc
-from imu_square.ncgen import DEFAULT_APPROACH_MM, DIALECTS, block_arcs_deg, generate_nc
+from imu_square.ncgen import (
+    DEFAULT_APPROACH_MM,
+    DIALECTS,
+    START_DWELL_S,
+    block_arcs_deg,
+    generate_nc,
+)
 from imu_square.program import TestProgram, program_from_mapping
 
 # Coordinates are written with 3 decimals (1 um): a rounded point is within
@@ -119,10 +125,16 @@ def check_path(program, trace, marker_mcode=None):
             0.0, abs=angle_tol(program)
         )
 
+    # block 0 starts from rest: a dwell right after the lead-in feed move, then
+    # the dwells between blocks
     dwells = trace.of_kind("dwell")
-    expected = [program.dwell_s] * (len(plans) - 1) if program.dwell_s > 0 else []
+    expected = [max(program.dwell_s, START_DWELL_S)]
+    expected += [program.dwell_s] * (len(plans) - 1) if program.dwell_s > 0 else []
     assert [d.value for d in dwells] == pytest.approx(expected, abs=5e-4)
-    for d in dwells:
+    first = trace.events.index(dwells[0])
+    assert trace.events[first - 1] == lead_in[0]
+    assert trace.events[first + 1].text.startswith("IMU-SQUARE START BLOCK 0")
+    for d in dwells[1:]:
         before = [e for e in trace.events if e.line < d.line and e.kind == "comment"][-1]
         assert before.text.startswith("IMU-SQUARE END")
 
@@ -168,15 +180,18 @@ def test_block_arcs_never_shorter_than_half_circle(overshoot, arcs):
 @pytest.mark.parametrize(
     ("dialect", "preamble", "dwell", "end"),
     [
-        ("linuxcnc", "G21 G17 G90", "G4 P2.000", "M2"),
-        ("fanuc", "G21 G17 G90", "G4 X2.000", "M30"),
-        ("sinumerik", "G71 G17 G90", "G4 F2.000", "M30"),
+        ("linuxcnc", "G21 G17 G90 G91.1 G94 G40 G49 G80 G64", "G4 P2.000", "M2"),
+        ("fanuc", "G21 G17 G90 G94 G40 G49 G80 G64", "G4 X2.000", "M30"),
+        ("sinumerik", "G71 G17 G90 G94 G40 G64", "G4 F2.000", "M30"),
     ],
 )
 def test_dialect_words(dialect, preamble, dwell, end):
     lines = generate_nc(TestProgram(), dialect).splitlines()
-    assert any(line.startswith(preamble) for line in lines)
-    assert lines.count(dwell) == 1
+    # continuous-path mode explicitly, before any motion
+    assert preamble in lines
+    assert lines.index(preamble) < next(i for i, line in enumerate(lines) if line.startswith("G0"))
+    # before block 0 (max(2 s, START_DWELL_S)) and between the two blocks
+    assert lines.count(dwell) == 2
     assert end in lines
     if dialect == "sinumerik":
         assert not any("(" in line for line in lines)
@@ -184,6 +199,13 @@ def test_dialect_words(dialect, preamble, dwell, end):
         assert not any(";" in line for line in lines)
     if dialect == "fanuc":
         assert lines[0] == "%" and lines[-1] == "%"
+
+
+def test_linuxcnc_marker_needs_a_user_mcode_file_says_the_header():
+    lines = generate_nc(TestProgram(), "linuxcnc", marker_mcode=123).splitlines()
+    preamble = next(i for i, line in enumerate(lines) if line.startswith("G21"))
+    assert any("M123" in line and "USER M-CODE PATH" in line for line in lines[:preamble])
+    assert "USER M-CODE" not in generate_nc(TestProgram(), "linuxcnc")
 
 
 def test_feed_override_lock_linuxcnc_only():
@@ -218,12 +240,15 @@ def test_bad_generator_options(kwargs, match):
     [
         ("fanuc", "G21 G17 G90\nG0 X1 Y1 ; hi\nM30\n", "comment syntax not allowed in fanuc"),
         ("sinumerik", "G71 G17 G90\n(hi)\nM30\n", "comment syntax not allowed"),
-        ("linuxcnc", "G17 G90\nG0 X1 Y1\nM2\n", r"motion before \['G21'\]"),
-        ("linuxcnc", "G21 G17 G90\nG1 X1 Y1\nM2\n", "feed move before any F"),
-        ("linuxcnc", "G21 G17 G90\nG0 X1 Y0\nG3 X-1.1 Y0 I-1 J0 F10\nM2\n", "end radius"),
+        ("linuxcnc", "G17 G90 G64\nG0 X1 Y1\nM2\n", r"motion before \['G21'\]"),
+        ("linuxcnc", "G21 G17 G90\nG0 X1 Y1\nM2\n", r"motion before \['G64'\]"),
+        ("fanuc", "G21 G17 G90 G61\nG0 X1 Y1\nM30\n", "one motion or dwell G-code"),
+        ("sinumerik", "G71 G17 G90\nG0 X1 Y1\nM30\n", r"motion before \['G64'\]"),
+        ("linuxcnc", "G21 G17 G90 G64\nG1 X1 Y1\nM2\n", "feed move before any F"),
+        ("linuxcnc", "G21 G17 G90 G64\nG0 X1 Y0\nG3 X-1.1 Y0 I-1 J0 F10\nM2\n", "end radius"),
         ("fanuc", "G21 G17 G90\nG4 P2.0\nM30\n", "fanuc dwell is 'G4 X<seconds>'"),
-        ("linuxcnc", "G21 G17 G90\nG0 X1 Y1 Z3\nM2\n", "G0 takes X, Y"),
-        ("linuxcnc", "G21 G17 G90\nG0 X1 Y1\n", "no M2 program end"),
+        ("linuxcnc", "G21 G17 G90 G64\nG0 X1 Y1 Z3\nM2\n", "G0 takes X, Y"),
+        ("linuxcnc", "G21 G17 G90 G64\nG0 X1 Y1\n", "no M2 program end"),
         ("linuxcnc", "G21 G17 G90\nM2\nG0 X1 Y1\n", "nothing may follow the program end"),
         ("linuxcnc", "G21 G17 G90 G0 X1 Y1 X2\nM2\n", "a word letter repeats"),
     ],
@@ -361,11 +386,15 @@ def check_interpreted(program, out):
     r_mm = program.radius_m * 1e3
     pos = None
     blocks = []
+    start_dwell = []
+    previous = None
     for name, *args in out["events"]:
         if name in ("straight_traverse", "straight_feed"):
             pos = (args[0] * INCH_MM, args[1] * INCH_MM)
         elif name == "comment" and args[0].startswith("IMU-SQUARE START"):
             blocks.append({"angle": 0.0, "rot": set(), "markers": []})
+        elif name == "dwell" and not blocks:
+            start_dwell.append((previous, args[0]))
         elif name == "user_defined_function":
             assert args[0] in (1, 99)  # M101, M199 = user M-code 100 + n
             blocks[-1]["markers"].append(blocks[-1]["angle"])
@@ -389,6 +418,9 @@ def check_interpreted(program, out):
             blocks[-1]["angle"] += partial + 2 * math.pi * turns
             blocks[-1]["rot"].add(sign)
             pos = (x1, y1)
+        previous = name
+    # block 0 starts from rest: the lead-in feed move, a dwell, then block 0
+    assert start_dwell == [("straight_feed", pytest.approx(max(program.dwell_s, START_DWELL_S)))]
     plans = program.blocks()
     assert len(blocks) == len(plans)
     for plan, block in zip(plans, blocks, strict=True):

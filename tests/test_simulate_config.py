@@ -107,6 +107,11 @@ def test_machine_file_errors(tmp_path, text, match):
         ("[sensor]\nrange_g = nan\n", r"range_g must be in \(0, inf\], got nan"),
         ("[sensor_gain_mismatch]\ngain_percent = [1, 2]\n", r"three numbers \[x, y, z\]"),
         ("[sample_clock_error]\nppm = true\n", r"ppm must be a number, got True"),
+        # a drift section without its start value would invent a warm-up from 0
+        (
+            "[sensor]\nbeta_urad = 30\n[sensor_thermal_drift]\ntau_warm_s = 100\n",
+            r"\[sensor_thermal_drift\] needs beta_0_urad .*got only \['tau_warm_s'\]",
+        ),
     ],
 )
 def test_sensor_file_errors(tmp_path, text, match):

@@ -15,7 +15,14 @@ import pytest
 from numpy.testing import assert_allclose
 
 from imu_square.program import TestProgram
-from imu_square.simulate import Geometry, MachineModel, SensorModel, chapman_machine, simulate_run
+from imu_square.simulate import (
+    Geometry,
+    MachineModel,
+    SensorModel,
+    chapman_machine,
+    simulate_run,
+    with_effects,
+)
 from imu_square.simulate.kinematics import carriage_motion
 from imu_square.simulate.trajectory import build_timeline
 
@@ -189,3 +196,84 @@ def test_drifting_squareness_and_beta_are_measured_at_their_window_means():
     # CCW sees the means over its window, CW over its; equal windows: their mean is the truth
     assert_allclose(0.5 * (dev["cw"] - dev["ccw"]), truth["squareness_rad"], atol=TOL)
     assert abs(dev["cw"] + dev["ccw"]) > 1e-6  # the drift between the blocks is resolved
+
+
+def measured_theta_diff(recording, truth):
+    """theta_y - theta_x, mean of CCW and flipped CW, position-angle domain. [rad]"""
+    dev = phase_deviation(recording, truth)
+    return 0.5 * (dev["cw"] - dev["ccw"])
+
+
+@pytest.mark.parametrize(
+    ("machine", "sensor", "centre_m", "expected"),
+    [
+        # Chapman machine 2 at (200, -100) mm: the circle sees 15 - 50/2 = -10 um/m
+        (MachineModel(geometry=chapman_machine(2)), SENSOR, (0.2, -0.1), -10e-6),
+        # the gravity_coupling preset: atan(g k r / A) = 980.66 urad, no squareness at all
+        (with_effects(["gravity_coupling"], None, SENSOR)[0], SENSOR, (0.0, 0.0), 980.66e-6),
+        # machine 5 (both bows with yaw) off centre, beta and a small gravity coupling
+        (
+            MachineModel(geometry=chapman_machine(5), tilt_per_m=(2e-6, 5e-6, -3e-6, 1e-6)),
+            SensorModel(sample_rate_hz=200.0, beta_rad=40e-6),
+            (0.2, -0.1),
+            None,
+        ),
+    ],
+    ids=["chapman-2-off-centre", "gravity-preset", "chapman-5-beta-gravity"],
+)
+def test_expected_theta_diff_is_what_the_circle_measures(machine, sensor, centre_m, expected):
+    """``squareness_rad`` is the global alpha + beta; the circle measures
+    local_squareness + beta + gravity_phase (first order), here to 0.1 urad."""
+    program = TestProgram(
+        radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=3, dwell_s=0.5, centre_m=centre_m
+    )
+    recording, truth = run(machine, sensor, program)
+    measured = measured_theta_diff(recording, truth)
+    if expected is not None:
+        assert_allclose(measured, expected, atol=0.01e-6)
+    first = truth["local_squareness_rad"] + truth["beta_rad"] + truth["gravity_phase_rad"]
+    assert truth["expected_theta_diff_rad"] == first
+    assert_allclose(truth["expected_theta_diff_rad"], measured, atol=TOL)
+    assert_allclose(truth["expected_theta_diff_exact_rad"], measured, atol=TOL)
+    assert abs(truth["squareness_rad"] - measured) > 10e-6  # the distinction matters here
+
+
+def test_expected_theta_diff_exact_includes_the_rotation():
+    """eps_c = 30 deg with machine 5 off centre and beta: the exact expectation
+    (alpha -> alpha cos 2 eps, etc.) matches the fit, the first-order one does not."""
+    program = TestProgram(
+        radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=3, dwell_s=0.5, centre_m=(0.2, -0.1)
+    )
+    sensor = SensorModel(sample_rate_hz=200.0, eps_c_rad=math.radians(30.0), beta_rad=40e-6)
+    recording, truth = run(MachineModel(geometry=chapman_machine(5)), sensor, program)
+    measured = measured_theta_diff(recording, truth)
+    assert_allclose(truth["expected_theta_diff_exact_rad"], measured, atol=TOL)
+    assert abs(truth["expected_theta_diff_rad"] - measured) > 10e-6
+
+
+def test_mean_theta_is_eps_c_plus_carriage_yaw_minus_rotation_part_of_j():
+    """(theta_x + theta_y)/2 = eps_c + yaw - (J_yx - J_xy)/2 + beta/2 (docs/model.md, Truth),
+    read in the position-angle domain from the ideal-timeline phase of each block."""
+    centre = (0.2, -0.1)
+    program = TestProgram(
+        radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=3, dwell_s=0.5, centre_m=centre
+    )
+    geometry = chapman_machine(5)
+    sensor = SensorModel(sample_rate_hz=200.0, eps_c_rad=0.01, beta_rad=40e-6)
+    recording, truth = run(MachineModel(geometry=geometry), sensor, program)
+    timeline = build_timeline(program, 0.15, "trapezoid", 1.0, 1.0)
+    phi, _, _ = timeline.angle(recording.time_s - recording.time_s[0])
+    accel = recording.accel.astype(float)
+    thetas = []
+    for b in truth["blocks"]:
+        m = (recording.time_s >= b["analysed_start_s"]) & (recording.time_s < b["analysed_end_s"])
+        design = np.column_stack([np.ones(m.sum()), np.cos(phi[m]), np.sin(phi[m])])
+        (_, px, qx), *_ = np.linalg.lstsq(design, accel[m, 0], rcond=None)
+        (_, py, qy), *_ = np.linalg.lstsq(design, accel[m, 1], rcond=None)
+        # a_x = -A cos(phi - theta_x), a_y = -A sin(phi - theta_y)
+        thetas += [math.atan2(-qx, -px), math.atan2(py, -qy)]
+    _, jxy, jyx, _ = (float(v) for v in geometry.jacobian(*centre))
+    expected = truth["eps_c_rad"] + truth["carriage_yaw_rad"] - (jyx - jxy) / 2
+    expected += truth["beta_rad"] / 2
+    assert truth["carriage_yaw_rad"] != 0.0
+    assert_allclose(np.mean(thetas), expected, atol=TOL)

@@ -58,9 +58,13 @@ def run(args):
     truth_path.parent.mkdir(parents=True, exist_ok=True)
     write_mcap(recording, out)
     truth_path.write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
+    square = f"{round(truth['squareness_rad'] * 1e6, 2) + 0.0:.2f} urad"
+    expected = f"{round(truth['expected_theta_diff_exact_rad'] * 1e6, 2) + 0.0:.2f} urad"
+    if expected != square:
+        square += f" (expected theta_y - theta_x on this circle {expected})"
     print(
         f"{out}: {recording.n_samples} samples, {recording.duration_s:.1f} s, "
-        f"truth squareness {truth['squareness_rad'] * 1e6:.2f} urad; truth in {truth_path}",
+        f"truth squareness {square}; truth in {truth_path}",
         file=sys.stderr,
     )
     return 0

@@ -225,10 +225,14 @@ def diagonal_test(deviation, diagonals, n_targets=11, reversal_m=0.0):
     n_targets : int
         Equispaced targets along each diagonal, both ends included.
     reversal_m : float
-        Lost motion along the diagonal: approaching a target in reverse,
-        the machine stops this much short of where it stops going forward
-        (the forward mean error is raised by half of it, the reverse one
-        lowered by half). [m]
+        Reversal value along the diagonal: the forward mean error (targets
+        approached from ``start`` towards ``end``) is raised by half of it and
+        the reverse one lowered by half, so for a positive value the machine
+        passes each target by ``reversal_m / 2`` in its direction of travel
+        and stops ``reversal_m`` further along the reverse direction than
+        going forward. A negative value models lost motion (the machine stops
+        short of each target in both directions); ``E`` and ``B`` depend
+        only on its size. [m]
 
     Returns
     -------

@@ -6,7 +6,10 @@ direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
 
 - backlash ``b``: the axis lags the command by ``b/2`` against its direction of
   motion, taken up smoothly: offset ``-(b/2) D(t)``, where ``D`` steps from the
-  old to the new direction along ``(1 + tanh(t'/tau_b)) / 2``;
+  old to the new direction along ``(1 + tanh(t'/tau_b)) / 2``. The take-up
+  is centred on the reversal, so half of it happens before the commanded
+  reversal (acausal, a smooth stand-in for the real take-up, which starts
+  at the reversal); the reversal times in the truth are its centre;
 - reversal spike: following-error bump ``-d h u^2 exp(-u)``, ``u = t'/tau_s``,
   whose acceleration starts at the peak ``2 h / tau_s^2`` and has zero area;
 - structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which

@@ -220,7 +220,7 @@ def machine_from_mapping(doc, source="<machine>"):
         Naming the file, section and field, what is allowed and what was received.
     """
     s = Sections(doc, source, _LAYOUT)
-    big = 1e6  # um/m, um: anything above 1 mm/m or 1 m is a unit mistake
+    big = 1e6  # urad/m: a tilt rate above 1 rad/m is a unit mistake
     lengths = s.pair("geometry", "axis_length_mm", 1e-3)
     if min(lengths) <= 0:
         raw = s.raw("geometry", "axis_length_mm")

@@ -4,6 +4,9 @@ White noise of one-sided density ``d`` at sample rate ``fs`` has a per-sample
 standard deviation ``d sqrt(fs / 2)``. The 1/f part shapes the same white
 noise in the frequency domain by ``sqrt(1 + fc / f)``, so the one-sided PSD is
 ``d^2 (1 + fc / f)``; the zero-frequency bin (the mean) is left white.
+Shaped over the FFT of the whole record, the 1/f part is periodic over the
+record length ``T`` (its end joins its start) and has no power below
+``1/T``: a real sensor's slower wander, beyond the record, is not modelled.
 """
 
 import numpy as np

@@ -15,7 +15,7 @@ A sensor file (all sections optional; absent = ideal, noiseless)::
     tilt_y_urad = 0.0
 
     [sensor_thermal_drift]          # beta(t) = beta + (beta_0 - beta) exp(-t/tau)
-    beta_0_urad = 0.0
+    beta_0_urad = 200.0             # required when the section is present
     tau_warm_s = 600.0
 
     [sensor_gain_mismatch]
@@ -233,6 +233,11 @@ def sensor_from_mapping(doc, source="<sensor>"):
     s = Sections(doc, source, _LAYOUT)
     beta = s.number("sensor", "beta_urad", 1e-6, -1e5, 1e5)
     drift = s.has("sensor_thermal_drift")
+    if drift and "beta_0_urad" not in doc["sensor_thermal_drift"]:
+        raise ConfigError(
+            f"{source}: [sensor_thermal_drift] needs beta_0_urad (the non-orthogonality at "
+            f"power-on, urad); got only {sorted(doc['sensor_thermal_drift'])!r}"
+        )
     return SensorModel(
         model=s.text("sensor", "model"),
         sample_rate_hz=s.number("sensor", "sample_rate_hz", 1.0, 0.0, 1e6, lo_open=True),

@@ -18,10 +18,13 @@ timeline analytically.
 """
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
+
+from imu_square.errors import ConfigError, ImuSquareWarning
 
 RAMP_PROFILES = ("trapezoid", "s_curve")
 
@@ -54,7 +57,8 @@ def ramp_fraction(u, profile):
 
 
 def _ramp_inverse(q, profile):
-    """``u`` in [0, 1] with ``F(u) = q`` (``0 <= q <= 1/2``)."""
+    """``u`` in [0, 1] with ``F(u) = q`` (``q`` clamped to ``[0, 1/2]`` against rounding)."""
+    q = min(max(q, 0.0), 0.5)
     if profile == "trapezoid":
         return math.sqrt(2.0 * q)
     if q <= 0.0:
@@ -152,9 +156,11 @@ class BlockMotion:
         Parameters
         ----------
         s : float
-            Progress angle in ``[0, angle_rad]``. [rad]
+            Progress angle in ``[0, angle_rad]``; clamped to it against
+            rounding. [rad]
         """
         w, tr = self.omega_rad_s, self.ramp_s
+        s = min(max(s, 0.0), self.angle_rad)
         half = 0.5 * w * tr
         if s < half:
             return self.t_start_s + tr * _ramp_inverse(s / (w * tr), self.profile)
@@ -273,6 +279,11 @@ class Timeline:
             crossings = offset + math.pi * np.arange(n_lo, n_hi + 1)
             if b.sign < 0:
                 crossings = crossings[::-1]
+            # A block that starts or ends on a reversal angle must not count
+            # it as a crossing inside the block because of rounding.
+            tol = 1e-9 * b.angle_rad
+            travelled = np.abs(crossings - b.start_angle_rad)
+            crossings = crossings[(travelled > tol) & (travelled < b.angle_rad - tol)]
             bounds = [b.start_angle_rad, *crossings, b.end_angle_rad]
             for k in range(len(bounds) - 1):
                 mid = 0.5 * (bounds[k] + bounds[k + 1])
@@ -309,7 +320,35 @@ def build_timeline(program, ramp_s, profile, lead_in_s, lead_out_s):
     Returns
     -------
     Timeline
+
+    Raises
+    ------
+    ConfigError
+        If ``ramp_s`` exceeds the block's nominal duration (the two ramps of a
+        block would overlap).
+
+    Warns
+    -----
+    ImuSquareWarning
+        If a ramp covers more than the overshoot, so it reaches into the
+        analysed whole cycles.
     """
+    block_s = program.block_duration_s
+    if ramp_s > block_s:
+        raise ConfigError(
+            f"[machine] ramp_s = {ramp_s!r} s is longer than the block duration "
+            f"{block_s:.6g} s (block angle / angular speed): the start and end feed "
+            "ramps would overlap; shorten ramp_s or lower the feed"
+        )
+    ramp_angle = 0.5 * program.omega_rad_s * ramp_s
+    if ramp_angle > program.overshoot_rad:
+        warnings.warn(
+            f"[machine] ramp_s = {ramp_s!r} s covers {math.degrees(ramp_angle):.4g} deg "
+            f"of arc, more than the overshoot of {math.degrees(program.overshoot_rad):.4g} deg: "
+            "the feed ramps reach into the analysed cycles",
+            ImuSquareWarning,
+            stacklevel=2,
+        )
     blocks = []
     t = lead_in_s
     for plan in program.blocks():

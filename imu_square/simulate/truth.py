@@ -8,10 +8,21 @@ measures to first order.
 Keys:
 
 - ``alpha_rad``: machine squareness (E_C0X); ``beta_rad``: sensor
-  non-orthogonality (E_SC0X); ``squareness_rad = alpha + beta``, what
-  ``theta_y - theta_x`` measures (paper Eq. 4);
+  non-orthogonality (E_SC0X); ``squareness_rad = alpha + beta``, the global
+  measurand (paper Eq. 4). It is what ``theta_y - theta_x`` measures only on
+  a machine without straightness errors or gravity coupling, see
+  ``expected_theta_diff_rad``;
 - ``local_squareness_rad``: the squareness a ballbar sees on this circle,
   from the geometry alone (straightness/yaw included, sensor excluded);
+- ``expected_theta_diff_rad = local_squareness + beta + gravity_phase``:
+  what ``theta_y - theta_x`` (mean of CCW and flipped CW) should give on
+  this run, to first order in every error;
+- ``expected_theta_diff_exact_rad``: the same without the first-order
+  approximation in the sensor rotation: the local Jacobian ``J`` of the
+  error map and the gravity coupling ``K`` act on the commanded acceleration
+  as ``M = I + J - (g r / A) K``, the sensor turns it by
+  ``-(eps_c + carriage_yaw)`` and leans its y axis by ``beta``, and the
+  thetas are read off exactly (``alpha`` shows as ``alpha cos(2 eps_c)``);
 - ``eps_c_rad``: sensor mounting rotation; ``carriage_yaw_rad``: the
   carriage's yaw at the circle centre (associated yaw), which adds to it;
 - ``servo_mismatch_rad = omega (tau_y - tau_x)``;
@@ -21,9 +32,10 @@ Keys:
   ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``;
 - ``effects``: the named effects that are on, with their parameters (SI);
 - ``seed``, ``program`` (file units), ``n_samples``, ``t0_ns``;
-- ``blocks``: per block ``index``, ``direction``, true motion ``start_ns`` /
-  ``end_ns`` (recording clock) and ``start_s`` / ``end_s`` from the first
-  sample, and ``analysed_start_s`` / ``analysed_end_s`` (the whole cycles
+- ``blocks``: per block ``index``, ``direction``, the start and end of the
+  commanded motion (each actual axis follows its servo lag ``tau`` later)
+  as ``start_ns`` / ``end_ns`` (recording clock) and ``start_s`` / ``end_s``
+  from the first sample, and ``analysed_start_s`` / ``analysed_end_s`` (the whole cycles
   between the overshoots);
 - ``reversal_times_s``: ``{"x": [...], "y": [...]}``, when each actual axis
   reverses (servo lag included), from the first sample.
@@ -43,6 +55,20 @@ def _gravity_phases(program, machine):
     theta_x = -math.atan2(G * kxy * r, a - G * kxx * r)
     theta_y = math.atan2(G * kyx * r, a - G * kyy * r)
     return theta_x, theta_y
+
+
+def _exact_theta_diff(program, machine, alpha_beta_t, eps):
+    """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``."""
+    beta, t_mean = alpha_beta_t
+    cx, cy = program.centre_m
+    jxx, jxy, jyx, jyy = (float(v) for v in machine.geometry.jacobian(cx, cy, t_mean))
+    kxx, kxy, kyx, kyy = machine.tilt_per_m
+    q = G * program.radius_m / program.centripetal_m_s2
+    m = np.array([[1.0 + jxx - q * kxx, jxy - q * kxy], [jyx - q * kyx, 1.0 + jyy - q * kyy]])
+    c, s = math.cos(eps), math.sin(eps)
+    n = np.array([[c, s], [-s, c]]) @ m
+    ny = -math.sin(beta) * n[0] + math.cos(beta) * n[1]
+    return math.atan2(-ny[0], ny[1]) - math.atan2(n[0, 1], n[0, 0])
 
 
 def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
@@ -102,13 +128,20 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
     for axis, name, tau in ((0, "x", machine.tau_x_s), (1, "y", machine.tau_y_s)):
         times, _, _ = timeline.reversals(axis)
         reversals[name] = [(t + tau) * clock_factor for t in times]
+    local = float(geometry.local_squareness(cx, cy, t_mean)) + 0.0
+    yaw = float(geometry.carriage_yaw(cx, cy))
     return {
         "alpha_rad": alpha,
         "beta_rad": beta,
         "squareness_rad": alpha + beta,
-        "local_squareness_rad": float(geometry.local_squareness(cx, cy, t_mean)) + 0.0,
+        "local_squareness_rad": local,
+        "expected_theta_diff_rad": local + beta + theta_gy - theta_gx,
+        "expected_theta_diff_exact_rad": _exact_theta_diff(
+            program, machine, (beta, t_mean), sensor.eps_c_rad + yaw
+        )
+        + 0.0,
         "eps_c_rad": sensor.eps_c_rad,
-        "carriage_yaw_rad": float(geometry.carriage_yaw(cx, cy)),
+        "carriage_yaw_rad": yaw,
         "servo_mismatch_rad": omega * (machine.tau_y_s - machine.tau_x_s),
         "gravity_phase_rad": theta_gy - theta_gx,
         "omega_rad_s": omega,
