@@ -14,6 +14,7 @@ A user's mistake is one line on stderr and a non-zero exit, never a traceback.
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
 import warnings
@@ -90,6 +91,10 @@ def main(argv=None):
         except KeyboardInterrupt:
             print(f"imu-square {args.command}: interrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
+        except BrokenPipeError:
+            # stdout went to a pipe that closed early (`... | head`): not an error of ours.
+            sys.stdout = open(os.devnull, "w")  # keeps the interpreter's exit flush quiet
+            return EXIT_OK
         finally:
             log.removeHandler(handler)
 

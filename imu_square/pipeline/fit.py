@@ -1,0 +1,439 @@
+"""Robust sine fits: vectorised IRLS and the paper's two-stage fit.
+
+Stage 1 (paper, Section 4 [1]_) fits, per axis, on samples mapped to their
+commanded position angle ``phi`` (``docs/model.md``)::
+
+    a_x(phi) = c_x - A_x cos(phi - theta_x)
+    a_y(phi) = c_y - A_y sin(phi - theta_y)
+
+which is linear in ``[1, cos(phi), sin(phi)]``; the fit is a least-squares
+fit with bisquare (Tukey biweight) weights, by iteratively reweighted least
+squares (IRLS). :func:`fit_irls` solves many such fits at once (one row of
+``endog`` per fit, a shared design) with closed-form 3x3 weighted normal
+equations, and reproduces ``statsmodels`` ``RLM(endog, exog,
+M=TukeyBiweight()).fit()`` with its default options to rounding. Two
+``statsmodels`` details are kept on purpose so that the numbers agree: the
+"dev" criterion evaluates ``rho(resid / s2)`` where ``s2`` is the weighted
+residual *variance* of the last WLS step (not the robust scale), and the
+iteration count starts at 1 for the OLS start.
+
+Stage 2 of the paper fits the cross terms ``C_y cos(phi + pi/2 - theta_y)``
+(in ``a_x``) and ``C_x cos(phi - theta_x)`` (in ``a_y``) to the stage-1
+residuals and reads the sensor rotation from ``C = A tan(eps_c)`` (Eq. 3).
+:func:`fit_cross_terms` implements it as written, but it is degenerate: both
+stages use the same frequency, so stage 1 has already absorbed every
+component at ``omega`` and the stage-2 amplitudes are zero up to noise
+whatever ``eps_c`` is (a rotation of a perfect circle is indistinguishable
+from a time shift). The pipeline therefore estimates ``eps_c`` from the mean
+phase ``(theta_x + theta_y) / 2`` with ``phi`` anchored at the middle of each
+block's motion (:mod:`imu_square.pipeline.squareness`, ``docs/model.md``).
+
+References
+----------
+.. [1] K. Szipka, A. Archenti, G. W. Vogl, M. A. Donmez, "Identification of
+   machine tool squareness errors via inertial measurements", CIRP Annals 68
+   (2019).
+"""
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from statsmodels.robust import norms
+
+from imu_square.errors import AnalysisError, ImuSquareWarning, check_option
+
+NORMS = {
+    "tukey": norms.TukeyBiweight,
+    "huber": norms.HuberT,
+    "ols": norms.LeastSquares,
+}
+DEFAULT_TUNING = {"tukey": 4.685, "huber": 1.345, "ols": None}
+_MAD_TO_SD = 0.6744897501960817  # scipy.stats.norm.ppf(0.75), as statsmodels.robust.scale.mad
+
+
+def robust_norm(name="tukey", tuning=None):
+    """A ``statsmodels`` robust norm by name.
+
+    Parameters
+    ----------
+    name : {"tukey", "huber", "ols"}
+        Tukey biweight (the paper's bisquare), Huber, or plain least squares.
+    tuning : float, optional
+        Tuning constant in units of the robust scale; the norm's default
+        (4.685 for Tukey, 95 % efficiency at the normal) if None.
+
+    Returns
+    -------
+    statsmodels.robust.norms.RobustNorm
+    """
+    check_option("robust norm", name, NORMS)
+    if name == "ols":
+        return norms.LeastSquares()
+    return NORMS[name](DEFAULT_TUNING[name] if tuning is None else float(tuning))
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Robust linear fits of several rows sharing one design.
+
+    Attributes
+    ----------
+    params : ndarray, shape (n_fits, n_params)
+        Coefficients. [unit of endog]
+    bse : ndarray, shape (n_fits, n_params)
+        Standard errors, ``statsmodels`` "H1" covariance. [unit of endog]
+    cov : ndarray, shape (n_fits, n_params, n_params)
+        Covariance of ``params`` ("H1"). [unit of endog squared]
+    resid : ndarray, shape (n_fits, n_obs)
+        Residuals. [unit of endog]
+    weights : ndarray, shape (n_fits, n_obs)
+        Weights of the last IRLS step, in [0, 1].
+    scale : ndarray, shape (n_fits,)
+        Robust scale (MAD about zero / 0.6745) of the residuals. [unit of endog]
+    iterations : ndarray of int, shape (n_fits,)
+        IRLS iterations, counting the OLS start as 1 (as ``statsmodels``).
+    converged : ndarray of bool, shape (n_fits,)
+        Whether the criterion fell below ``tol`` before ``maxiter``.
+    options : dict
+        Norm, tuning constant, ``maxiter``, ``tol``, ``conv``, ``update_scale``.
+    """
+
+    params: np.ndarray
+    bse: np.ndarray
+    cov: np.ndarray
+    resid: np.ndarray
+    weights: np.ndarray
+    scale: np.ndarray
+    iterations: np.ndarray
+    converged: np.ndarray
+    options: dict = field(default_factory=dict)
+
+
+def _mad0(resid):
+    return np.median(np.abs(resid), axis=-1) / _MAD_TO_SD
+
+
+def _rho(norm, z):
+    if type(norm) is norms.TukeyBiweight:  # same formula as statsmodels, without its temporaries
+        u = np.minimum(np.square(z / norm.c), 1.0)
+        return norm.c**2 / 6.0 * (1.0 - (1.0 - u) ** 3)
+    return norm.rho(z)
+
+
+def _weights(norm, z):
+    if type(norm) is norms.TukeyBiweight:
+        u = np.square(z / norm.c)
+        return np.where(u <= 1.0, np.square(1.0 - u), 0.0)
+    return norm.weights(z)
+
+
+def _solve_weighted(exog, outer, endog, w):
+    p = exog.shape[1]
+    xtwx = (w @ outer).reshape(-1, p, p)
+    xtwy = (w * endog) @ exog
+    return np.linalg.solve(xtwx, xtwy[..., None])[..., 0]
+
+
+def fit_irls(
+    exog,
+    endog,
+    norm=None,
+    *,
+    maxiter=50,
+    tol=1e-8,
+    conv="dev",
+    update_scale=True,
+    start_params=None,
+):
+    """Robust linear regression of every row of ``endog`` on ``exog`` by IRLS.
+
+    Same algorithm and defaults as ``statsmodels.robust.robust_linear_model.
+    RLM(endog_row, exog, M=norm).fit(maxiter, tol, scale_est="mad", cov="H1",
+    update_scale, conv)``, vectorised over rows; each row stops on its own
+    criterion.
+
+    Parameters
+    ----------
+    exog : ndarray, shape (n_obs, n_params)
+        Design matrix, shared by all fits, full column rank.
+    endog : ndarray, shape (n_obs,) or (n_fits, n_obs)
+        Observations, one fit per row. [any unit]
+    norm : statsmodels.robust.norms.RobustNorm, optional
+        Tukey biweight with c = 4.685 if None.
+    maxiter : int
+        Maximum number of iterations (the OLS start counts as 1).
+    tol : float
+        Convergence tolerance on the criterion.
+    conv : {"dev", "coefs"}
+        Criterion: change of the deviance, or of every coefficient.
+    update_scale : bool
+        Re-estimate the scale at every iteration.
+    start_params : ndarray, shape (n_params,) or (n_fits, n_params), optional
+        Starting coefficients instead of OLS (``statsmodels``' ``start_params``);
+        the starting scale is then the MAD of their residuals. [unit of endog]
+
+    Returns
+    -------
+    FitResult
+
+    Warns
+    -----
+    ImuSquareWarning
+        If a fit reaches ``maxiter`` without converging.
+    """
+    check_option("conv", conv, ("dev", "coefs"))
+    norm = robust_norm() if norm is None else norm
+    exog = np.asarray(exog, dtype=np.float64)
+    endog = np.atleast_2d(np.asarray(endog, dtype=np.float64))
+    n, p = exog.shape
+    if endog.shape[-1] != n:
+        raise AnalysisError(f"endog must have {n} columns like exog's rows, got {endog.shape}")
+    df_resid = n - p
+    outer = (exog[:, :, None] * exog[:, None, :]).reshape(n, p * p)
+
+    w = np.ones_like(endog)
+    if start_params is None:
+        params = _solve_weighted(exog, outer, endog, w)
+    else:
+        params = np.broadcast_to(np.asarray(start_params, dtype=np.float64), (endog.shape[0], p))
+        params = params.copy()
+    resid = endog - params @ exog.T
+    scale = _mad0(resid)
+
+    def criterion(params, resid, w):
+        if conv == "coefs":
+            return params.copy()
+        s2 = np.einsum("bn,bn->b", w, resid**2) / df_resid
+        return _rho(norm, resid / s2[:, None]).sum(axis=-1)
+
+    last = criterion(params, resid, w)
+    iterations = np.ones(endog.shape[0], dtype=int)
+    converged = np.zeros(endog.shape[0], dtype=bool)
+    active = np.ones(endog.shape[0], dtype=bool)
+    weights = w
+    while np.any(active):
+        idx = np.flatnonzero(active)
+        perfect = scale[idx] == 0.0
+        if np.any(perfect):  # exact fit: nothing left to reweight
+            converged[idx[perfect]] = True
+            active[idx[perfect]] = False
+            idx = idx[~perfect]
+            if idx.size == 0:
+                break
+        if idx.size == active.size:
+            idx = slice(None)  # all rows: views, no copies
+        w_i = _weights(norm, resid[idx] / scale[idx, None])
+        p_i = _solve_weighted(exog, outer, endog[idx], w_i)
+        r_i = endog[idx] - p_i @ exog.T
+        weights[idx], params[idx], resid[idx] = w_i, p_i, r_i
+        if update_scale:
+            scale[idx] = _mad0(r_i)
+        crit = criterion(p_i, r_i, w_i)
+        iterations[idx] += 1
+        change = np.abs(crit - last[idx])
+        small = ~np.any(change > tol, axis=-1) if conv == "coefs" else ~(change > tol)
+        last[idx] = crit
+        converged[idx] = small
+        active[idx] = ~small & (iterations[idx] < maxiter)
+    if not np.all(converged):
+        warnings.warn(
+            f"robust fit did not converge in maxiter={maxiter} iterations for "
+            f"{int(np.sum(~converged))} of {converged.size} fits",
+            ImuSquareWarning,
+            stacklevel=2,
+        )
+    cov = _cov_h1(norm, exog, resid, scale, df_resid)
+    return FitResult(
+        params=params,
+        bse=np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1)),
+        cov=cov,
+        resid=resid,
+        weights=weights,
+        scale=scale,
+        iterations=iterations,
+        converged=converged,
+        options={
+            "norm": type(norm).__name__,
+            "tuning": getattr(norm, "c", getattr(norm, "t", None)),
+            "maxiter": maxiter,
+            "tol": tol,
+            "conv": conv,
+            "update_scale": update_scale,
+            "scale_est": "mad",
+            "cov": "H1",
+        },
+    )
+
+
+def _cov_h1(norm, exog, resid, scale, df_resid):
+    n, p = exog.shape
+    safe = np.where(scale > 0, scale, 1.0)
+    sresid = np.where(scale[:, None] > 0, resid / safe[:, None], 0.0)
+    dpsi = norm.psi_deriv(sresid)
+    m = dpsi.mean(axis=-1)
+    k = 1 + p / n * dpsi.var(axis=-1) / m**2
+    ss_psi = np.sum(norm.psi(sresid) ** 2, axis=-1)
+    factor = k**2 * (ss_psi * scale**2 / df_resid) / m**2
+    return factor[:, None, None] * np.linalg.inv(exog.T @ exog)[None]
+
+
+def sine_design(phi):
+    """Design matrix ``[1, cos(phi), sin(phi)]``.
+
+    Parameters
+    ----------
+    phi : ndarray, shape (n_obs,)
+        Commanded position angle. [rad]
+
+    Returns
+    -------
+    ndarray, shape (n_obs, 3)
+    """
+    phi = np.asarray(phi, dtype=np.float64)
+    return np.column_stack([np.ones_like(phi), np.cos(phi), np.sin(phi)])
+
+
+@dataclass(frozen=True)
+class CircleFit:
+    """Stage-1 fits of both axes, for several traces sharing one phi grid.
+
+    Attributes
+    ----------
+    theta_x, theta_y : ndarray, shape (n_fits,)
+        Phase shifts of the model in the module docstring. [rad]
+    amp_x, amp_y : ndarray, shape (n_fits,)
+        Amplitudes A_x, A_y. [m/s^2]
+    offset_x, offset_y : ndarray, shape (n_fits,)
+        Constant terms c_x, c_y. [m/s^2]
+    u_theta_x, u_theta_y : ndarray, shape (n_fits,)
+        Standard errors of the phases from the fits' covariance (they assume
+        independent residuals, which low-passed data are not; the pipeline's
+        uncertainty comes from the scatter over cycles). [rad]
+    x, y : FitResult
+        The underlying linear fits, columns ``[1, cos, sin]``.
+    """
+
+    theta_x: np.ndarray
+    theta_y: np.ndarray
+    amp_x: np.ndarray
+    amp_y: np.ndarray
+    offset_x: np.ndarray
+    offset_y: np.ndarray
+    u_theta_x: np.ndarray
+    u_theta_y: np.ndarray
+    x: FitResult
+    y: FitResult
+
+    @property
+    def squareness(self):
+        """``theta_y - theta_x`` (paper, Eq. 4). [rad]"""
+        return self.theta_y - self.theta_x
+
+    @property
+    def mean_phase(self):
+        """``(theta_x + theta_y) / 2``, the sensor rotation when phi is anchored. [rad]"""
+        return 0.5 * (self.theta_x + self.theta_y)
+
+
+def _phase(a, b, cov, da, db):
+    # theta = atan2(a, b): delta-method standard error from the 2x2 covariance.
+    r2 = a**2 + b**2
+    ga, gb = b / r2, -a / r2
+    var = ga**2 * cov[:, da, da] + gb**2 * cov[:, db, db] + 2 * ga * gb * cov[:, da, db]
+    return np.arctan2(a, b), np.sqrt(var)
+
+
+def fit_circle(phi, accel_x, accel_y, norm=None, start_params=None, **irls_options):
+    """Stage 1: robust sine fit of both axes in the position-angle domain.
+
+    Parameters
+    ----------
+    phi : ndarray, shape (n_obs,)
+        Commanded position angle of each observation. [rad]
+    accel_x, accel_y : ndarray, shape (n_obs,) or (n_fits, n_obs)
+        Sensor x and y acceleration at ``phi``. [m/s^2]
+    norm : statsmodels.robust.norms.RobustNorm, optional
+        Tukey biweight (c = 4.685) if None.
+    start_params : tuple of 2 ndarray, optional
+        Starting coefficients ``[c, cos, sin]`` for x and for y, each of shape
+        (3,) or (n_fits, 3); OLS if None. [m/s^2]
+    **irls_options
+        Passed to :func:`fit_irls`.
+
+    Returns
+    -------
+    CircleFit
+    """
+    exog = sine_design(phi)
+    sx, sy = (None, None) if start_params is None else start_params
+    fx = fit_irls(exog, accel_x, norm, start_params=sx, **irls_options)
+    fy = fit_irls(exog, accel_y, norm, start_params=sy, **irls_options)
+    # a_x = c - A cos(phi - th) = c - A cos(th) cos(phi) - A sin(th) sin(phi)
+    theta_x, u_x = _phase(-fx.params[:, 2], -fx.params[:, 1], fx.cov, 2, 1)
+    # a_y = c - A sin(phi - th) = c + A sin(th) cos(phi) - A cos(th) sin(phi)
+    theta_y, u_y = _phase(fy.params[:, 1], -fy.params[:, 2], fy.cov, 1, 2)
+    return CircleFit(
+        theta_x=theta_x,
+        theta_y=theta_y,
+        amp_x=np.hypot(fx.params[:, 1], fx.params[:, 2]),
+        amp_y=np.hypot(fy.params[:, 1], fy.params[:, 2]),
+        offset_x=fx.params[:, 0],
+        offset_y=fy.params[:, 0],
+        u_theta_x=u_x,
+        u_theta_y=u_y,
+        x=fx,
+        y=fy,
+    )
+
+
+@dataclass(frozen=True)
+class CrossTermFit:
+    """Stage 2 of the paper: cross terms fitted to the stage-1 residuals.
+
+    Attributes
+    ----------
+    c_x, c_y : ndarray, shape (n_fits,)
+        Amplitudes C_x (in a_y) and C_y (in a_x) of Eqs. 1-2. [m/s^2]
+    eps_c : ndarray, shape (n_fits,)
+        ``arctan(C / A)`` averaged over both axes, Eq. 3. [rad]
+    """
+
+    c_x: np.ndarray
+    c_y: np.ndarray
+    eps_c: np.ndarray
+
+
+def fit_cross_terms(phi, stage1, norm=None, **irls_options):
+    """Stage 2 as in the paper: fit the cross terms to the stage-1 residuals.
+
+    ``a_x`` residual ``= C_y cos(phi + pi/2 - theta_y) + const`` and ``a_y``
+    residual ``= C_x cos(phi - theta_x) + const``, with the stage-1 phases held,
+    then ``eps_c = arctan(C_x / A_y)`` and ``arctan(C_y / A_x)`` (Eq. 3),
+    averaged. Degenerate for a circle: see the module docstring.
+
+    Parameters
+    ----------
+    phi : ndarray, shape (n_obs,)
+        Commanded position angle. [rad]
+    stage1 : CircleFit
+        The stage-1 fits on the same ``phi``.
+    norm : statsmodels.robust.norms.RobustNorm, optional
+        Tukey biweight if None.
+    **irls_options
+        Passed to :func:`fit_irls`.
+
+    Returns
+    -------
+    CrossTermFit
+    """
+    phi = np.asarray(phi, dtype=np.float64)
+    c_y = np.empty(stage1.theta_x.size)
+    c_x = np.empty_like(c_y)
+    for i in range(c_y.size):
+        ex = np.column_stack([np.ones_like(phi), np.cos(phi + np.pi / 2 - stage1.theta_y[i])])
+        ey = np.column_stack([np.ones_like(phi), np.cos(phi - stage1.theta_x[i])])
+        c_y[i] = fit_irls(ex, stage1.x.resid[i], norm, **irls_options).params[0, 1]
+        c_x[i] = fit_irls(ey, stage1.y.resid[i], norm, **irls_options).params[0, 1]
+    eps = 0.5 * (np.arctan(c_x / stage1.amp_y) + np.arctan(c_y / stage1.amp_x))
+    return CrossTermFit(c_x=c_x, c_y=c_y, eps_c=eps)

@@ -1,0 +1,359 @@
+"""Find the CCW and CW blocks in the data and map time to position angle.
+
+The recording's own signal decides where the machine moved: the magnitude of
+the horizontal acceleration about its median (the rest level, which holds a
+static tilt's share of gravity) rises to ``v^2/r`` while the table runs a
+circle. Motion intervals are matched to the program's blocks by their
+nominal duration and spacing, or by the block markers in the recording's
+events when present. Idle lead-in and lead-out, dwells, unknown feed ramps and
+the overshoots need no special case: only the cycles after the overshoot are
+analysed (:mod:`imu_square.pipeline.align`).
+
+For each block the direction and the actual circle frequency come from the
+data: the unwrapped phase of ``a_x + i a_y`` turns at ``+omega`` for CCW and
+``-omega`` for CW (the acceleration vector points at the centre and follows the
+tool). Its slope gives the period actually run, which the pipeline compares
+with the program (a disagreement means a feed override or a sample clock
+error).
+
+Time maps to commanded position angle by ``phi(t) = phi_mid + sign * omega *
+(t - t_mid)``, anchored at the middle of the detected motion, ``t_mid``, the
+mean of the threshold crossings at the start and the end of the block, which
+corresponds to ``phi_start + sign * block_angle / 2`` when the acceleration and
+deceleration ramps mirror each other (``docs/model.md``, eps_c).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imu_square.errors import AnalysisError
+
+# Motion intervals closer than this fraction of a period are one interval.
+_MERGE_PERIODS = 0.1
+# Accepted detected duration of a block, relative to the nominal one (ramps lengthen it).
+_DURATION_RANGE = (0.7, 1.5)
+# A circle's phase is linear in time: samples departing by more than this are off it, [rad]
+_MAX_PHASE_DEVIATION = 0.5
+# and a block with a larger fraction of such samples is not a circle.
+_MAX_OFF_CIRCLE = 0.2
+# A circle's acceleration magnitude is constant; a robust spread above this is not a circle.
+_MAX_ENVELOPE_SPREAD = 0.25
+# Samples kept away from motion when estimating the rest level.
+_REST_PAD = 50
+
+
+@dataclass(frozen=True)
+class Block:
+    """One block as found in the data.
+
+    Attributes
+    ----------
+    plan : BlockPlan
+        The program's plan of this block.
+    t_start_s, t_stop_s : float
+        Detected start and end of motion, from the first sample. [s]
+    u_t_mid_s : float
+        Standard uncertainty of the motion midpoint from the envelope noise. [s]
+    omega_rad_s : float
+        Signed angular speed from the phase slope (+ CCW, - CW). [rad/s]
+    """
+
+    plan: object
+    t_start_s: float
+    t_stop_s: float
+    u_t_mid_s: float
+    omega_rad_s: float
+
+    @property
+    def t_mid_s(self):
+        """Middle of the detected motion. [s]"""
+        return 0.5 * (self.t_start_s + self.t_stop_s)
+
+    @property
+    def direction(self):
+        """``"ccw"`` or ``"cw"``."""
+        return self.plan.direction
+
+    @property
+    def sign(self):
+        """+1 for CCW, -1 for CW."""
+        return self.plan.sign
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """The blocks found in a recording and the measured circle frequency.
+
+    Attributes
+    ----------
+    program : TestProgram
+        The program the blocks were matched to.
+    blocks : tuple of Block
+        Blocks in execution order.
+    omega_rad_s : float
+        Measured angular speed, pooled over blocks. [rad/s]
+    baseline_m_s2 : ndarray, shape (2,)
+        Rest level of x and y (median). [m/s^2]
+    threshold_m_s2 : float
+        Envelope level that separates motion from rest. [m/s^2]
+    """
+
+    program: object
+    blocks: tuple
+    omega_rad_s: float
+    baseline_m_s2: np.ndarray
+    threshold_m_s2: float
+
+    @property
+    def period_s(self):
+        """Measured period of one circle. [s]"""
+        return 2 * np.pi / self.omega_rad_s
+
+    @property
+    def period_disagreement(self):
+        """Measured period over the program's, minus 1 (positive: slower than programmed)."""
+        return self.period_s / self.program.period_s - 1
+
+    def phi(self, block, t_s):
+        """Commanded position angle at ``t_s`` within ``block``.
+
+        Parameters
+        ----------
+        block : Block
+            The block.
+        t_s : float or ndarray
+            Time from the first sample. [s]
+
+        Returns
+        -------
+        float or ndarray
+            Position angle, unwrapped along the block. [rad]
+        """
+        prog = self.program
+        phi_mid = block.plan.start_angle_rad + block.sign * prog.block_angle_rad / 2
+        return phi_mid + block.sign * self.omega_rad_s * (np.asarray(t_s) - block.t_mid_s)
+
+    def time_at(self, block, phi_rad):
+        """Inverse of :meth:`phi`: time at which ``block`` is at ``phi_rad``. [s]"""
+        prog = self.program
+        phi_mid = block.plan.start_angle_rad + block.sign * prog.block_angle_rad / 2
+        return block.t_mid_s + (np.asarray(phi_rad) - phi_mid) / (block.sign * self.omega_rad_s)
+
+
+def _runs(mask):
+    """Start (inclusive) and stop (exclusive) indices of True runs."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def _crossing(t, env, i, thr):
+    """Time where env crosses thr between samples i - 1 and i (linear)."""
+    if i <= 0 or i >= t.size:  # motion runs into the start or end of the recording
+        return float(t[min(max(i, 0), t.size - 1)]), 0.0
+    e0, e1 = env[i - 1], env[i]
+    frac = (thr - e0) / (e1 - e0)  # e0 and e1 straddle thr, so they differ
+    slope = abs(e1 - e0) / (t[i] - t[i - 1])
+    return float(t[i - 1] + frac * (t[i] - t[i - 1])), slope
+
+
+def _rotation(t, rel, period):
+    """Angular speed of the acceleration vector and the fraction of samples off a circle.
+
+    A first guess from the median phase step over an eighth of a period (no
+    unwrapping, robust to spikes), refined by a straight-line fit of the phase
+    left after removing it, on the samples within 0.5 rad of uniform rotation.
+    """
+    z = rel[:, 0] + 1j * rel[:, 1]
+    dt = float(np.median(np.diff(t)))
+    lag = max(1, round(period / 8 / dt))
+    if z.size <= lag + 2:
+        return 0.0, 1.0
+    omega0 = float(np.median(np.angle(z[lag:] * np.conj(z[:-lag])))) / (lag * dt)
+    tm = 0.5 * (t[0] + t[-1])
+    resid = np.angle(z * np.exp(-1j * omega0 * (t - tm)))
+    dev = np.angle(np.exp(1j * (resid - np.median(resid))))
+    good = np.abs(dev) < _MAX_PHASE_DEVIATION
+    if np.count_nonzero(good) < 3:
+        return omega0, 1.0
+    slope = np.polyfit(t[good] - tm, dev[good], 1)[0]
+    return omega0 + float(slope), 1.0 - float(np.mean(good))
+
+
+def _sense(t, rel, t0, t1, period):
+    """Rotation sense (+1 CCW, -1 CW, 0 none) of the acceleration in the middle half."""
+    sel = (t > 0.75 * t0 + 0.25 * t1) & (t < 0.25 * t0 + 0.75 * t1)
+    return int(np.sign(_rotation(t[sel], rel[sel], period)[0]))
+
+
+def _motion_intervals(t, env, thr, period):
+    starts, stops = _runs(env > thr)
+    if starts.size == 0:
+        return []
+    merged = [[starts[0], stops[0]]]
+    for a, b in zip(starts[1:], stops[1:], strict=True):
+        if t[a] - t[merged[-1][1] - 1] < _MERGE_PERIODS * period:
+            merged[-1][1] = b
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged if t[b - 1] - t[a] > 0.5 * period]
+
+
+def _select(intervals, t_start, t_stop, senses, blocks, events_t, nominal):
+    """Pick one interval per planned block, by events or by the nominal spacing."""
+    lo, hi = _DURATION_RANGE
+    cands = [
+        j for j in range(len(intervals)) if lo * nominal <= t_stop[j] - t_start[j] <= hi * nominal
+    ]
+    n = len(blocks)
+    mids = np.array([0.5 * (t_start[j] + t_stop[j]) for j in cands])
+    if events_t:
+        chosen = []
+        for plan in blocks:
+            if plan.index not in events_t:
+                break
+            if mids.size == 0:
+                return None
+            k = int(np.argmin(np.abs(mids - events_t[plan.index])))
+            if abs(mids[k] - events_t[plan.index]) > 0.5 * nominal:
+                return None
+            chosen.append(cands[k])
+        else:
+            return chosen
+    if len(cands) < n:
+        return None
+    offsets = np.array([p.t_start_s for p in blocks])
+    signs = np.array([p.sign for p in blocks])
+    starts = np.array([t_start[j] for j in cands])
+    turns = np.array([senses[j] for j in cands])
+    best, best_cost = None, (np.inf, np.inf)
+    for w in range(len(cands) - n + 1):
+        s = starts[w : w + n]
+        # Prefer windows whose rotation senses match the program, then the spacing.
+        cost = (
+            int(np.sum(turns[w : w + n] != signs)),
+            float(np.sum((s - s[0] - (offsets - offsets[0])) ** 2)),
+        )
+        if cost < best_cost:
+            best, best_cost = cands[w : w + n], cost
+    return best
+
+
+def segment(t_s, accel_xy, program, events=()):
+    """Find the program's blocks in low-passed horizontal acceleration.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n_samples,)
+        Sample times from the first sample. [s]
+    accel_xy : ndarray, shape (n_samples, 2)
+        Low-passed sensor x and y acceleration. [m/s^2]
+    program : TestProgram
+        The program the machine ran.
+    events : sequence of tuple (float, str, int)
+        ``(time_s, kind, block)`` of ``block_start`` / ``block_end`` markers,
+        time from the first sample; optional.
+
+    Returns
+    -------
+    Segmentation
+
+    Raises
+    ------
+    AnalysisError
+        If the data hold no circle matching the program, or a block turns the
+        wrong way, or its motion is not a circle.
+    """
+    t_s = np.asarray(t_s, dtype=np.float64)
+    baseline = np.median(accel_xy, axis=0)
+    rel = accel_xy - baseline
+    env = np.hypot(rel[:, 0], rel[:, 1])
+    plans = program.blocks()
+    nominal = program.block_duration_s
+    duration = t_s[-1] - t_s[0] if t_s.size > 1 else 0.0
+    fraction = np.clip(len(plans) * nominal / max(duration, 1e-9), 0.02, 0.98)
+    level = float(np.quantile(env, 1 - fraction / 2))
+    thr = 0.5 * level
+    intervals = _motion_intervals(t_s, env, thr, program.period_s)
+    rest = np.ones(t_s.size, dtype=bool)
+    for a, b in intervals:
+        rest[max(a - _REST_PAD, 0) : b + _REST_PAD] = False
+    if np.count_nonzero(rest) > _REST_PAD:
+        # Re-centre on the rest level alone: the median over the whole recording
+        # is pulled by the circles, which would make start and stop asymmetric.
+        baseline = np.median(accel_xy[rest], axis=0)
+        rel = accel_xy - baseline
+        env = np.hypot(rel[:, 0], rel[:, 1])
+        intervals = _motion_intervals(t_s, env, thr, program.period_s)
+    crossings = [(_crossing(t_s, env, a, thr), _crossing(t_s, env, b, thr)) for a, b in intervals]
+    t_start = [c[0][0] for c in crossings]
+    t_stop = [c[1][0] for c in crossings]
+    events_t = {}
+    starts_ev = {b: t for t, kind, b in events if kind == "block_start"}
+    for t, kind, b in events:
+        if kind == "block_end" and b in starts_ev:
+            events_t[b] = 0.5 * (starts_ev[b] + t)
+    senses = [
+        _sense(t_s, rel, a, b, program.period_s) for a, b in zip(t_start, t_stop, strict=True)
+    ]
+    chosen = _select(intervals, t_start, t_stop, senses, plans, events_t, nominal)
+    if chosen is None:
+        longest = max((b - a for a, b in zip(t_start, t_stop, strict=True)), default=0.0)
+        raise AnalysisError(
+            f"no circular motion matching the program: expected {len(plans)} blocks of about "
+            f"{nominal:.1f} s (period {program.period_s:.2f} s, v^2/r = "
+            f"{program.centripetal_m_s2:.3g} m/s^2), found {len(intervals)} motion interval(s) "
+            f"longer than half a period, the longest {longest:.1f} s"
+        )
+    blocks = []
+    half = 0.45 * program.cycles_per_direction * program.period_s
+    for plan, j in zip(plans, chosen, strict=True):
+        t0, t1 = t_start[j], t_stop[j]
+        mid = 0.5 * (t0 + t1)
+        sel = (t_s >= mid - half) & (t_s <= mid + half)
+        steady = rel[sel]
+        env_s = env[sel]
+        level_s = np.median(env_s)
+        spread = float(1.4826 * np.median(np.abs(env_s - level_s)) / level_s)
+        if spread > _MAX_ENVELOPE_SPREAD:
+            raise AnalysisError(
+                f"block {plan.index} ({plan.direction}) is not a circle: the horizontal "
+                f"acceleration's magnitude varies by {spread:.0%} (robust sd; a circle keeps it "
+                f"constant at v^2/r; below {_MAX_ENVELOPE_SPREAD:.0%})"
+            )
+        omega, off = _rotation(t_s[sel], steady, program.period_s)
+        if off > _MAX_OFF_CIRCLE:
+            raise AnalysisError(
+                f"block {plan.index} ({plan.direction}) is not a circle: the direction of the "
+                f"horizontal acceleration departs from uniform rotation by more than "
+                f"{_MAX_PHASE_DEVIATION} rad for {off:.0%} of the samples (a circle: none)"
+            )
+        if np.sign(omega) != plan.sign:
+            sense = "clockwise" if omega < 0 else "counter-clockwise"
+            raise AnalysisError(
+                f"block {plan.index} should run {plan.direction} but the data turn {sense}: "
+                f"check the program's order, or the sensor's mounting (upside down or "
+                f"x and y swapped)"
+            )
+        sd = spread * level_s  # robust sd of the envelope [m/s^2]
+        s0, s1 = crossings[j][0][1], crossings[j][1][1]
+        if s0 == 0.0 or s1 == 0.0:
+            raise AnalysisError(
+                f"block {plan.index} ({plan.direction}) is cut off by the "
+                f"{'start' if s0 == 0.0 else 'end'} of the recording: its motion midpoint, "
+                f"which anchors the position angle, is unknown"
+            )
+        # Envelope noise over its slope at each crossing, and the sampling grid
+        # (an onset between two samples is placed uniformly within dt).
+        quant = np.median(np.diff(t_s)) / np.sqrt(12)
+        u_mid = 0.5 * float(np.hypot(np.hypot(sd / s0, quant), np.hypot(sd / s1, quant)))
+        blocks.append(Block(plan, t0, t1, u_mid, omega))
+    weights = np.array([b.t_stop_s - b.t_start_s for b in blocks])
+    omega = float(np.sum(np.abs([b.omega_rad_s for b in blocks]) * weights) / np.sum(weights))
+    return Segmentation(
+        program=program,
+        blocks=tuple(blocks),
+        omega_rad_s=omega,
+        baseline_m_s2=baseline,
+        threshold_m_s2=thr,
+    )

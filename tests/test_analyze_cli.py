@@ -1,0 +1,102 @@
+"""``imu-square analyze`` end to end: MCAP files in, summary, JSON lines and a plot out."""
+
+import json
+from pathlib import Path
+
+import pytest
+from pipeline_synth import synth_circle
+
+from imu_square.cli import main
+from imu_square.mcap_io import write_mcap
+from imu_square.program import TestProgram
+
+PROG = TestProgram(cycles_per_direction=3, dwell_s=1.0)
+REALDATA = Path("/work/shared/realdata/Inkering__printnoser__rectangle_1__accel.csv")
+
+
+def _write(tmp_path, name, **kw):
+    rec, truth = synth_circle(PROG, fs=100.0, **kw)
+    path = tmp_path / name
+    write_mcap(rec, path)
+    return path, truth
+
+
+@pytest.mark.slow
+def test_json_lines_summary_and_plot(tmp_path, capsys):
+    runs = [
+        _write(tmp_path, f"run{i}.mcap", alpha=60e-6, density=1e-6, seed=i)[0] for i in range(3)
+    ]
+    png = tmp_path / "out.png"
+    code = main(["analyze", *map(str, runs), "--json", "--plot", str(png), "--bootstrap", "20"])
+    out, err = capsys.readouterr()
+    assert code == 0
+    docs = [json.loads(line) for line in out.strip().splitlines()]
+    assert len(docs) == 3
+    for doc in docs:
+        # CRB for 6 cycles at 1e-6 m/s^2/rtHz is ~2.3 urad.
+        assert doc["squareness_urad"] == pytest.approx(60.0, abs=12.0)
+        assert doc["cycles_used"] == {"ccw": 3, "cw": 3}
+    assert docs[-1]["convergence"]["n_runs"] == [1, 2, 3]
+    assert docs[0]["convergence"]["u_mean_urad"] == [None]
+    assert "squareness" in err and "µm/m" in err and "eps_c" in err
+    assert "after 3 runs: mean" in err
+    assert png.stat().st_size > 20_000
+
+
+def test_options_reach_the_analysis(tmp_path, capsys):
+    path, _ = _write(tmp_path, "run.mcap", density=1e-6)
+    code = main(
+        ["analyze", str(path), "--json", "--cutoff-hz", "2", "--order", "2", "--bootstrap", "0"]
+    )
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert doc["options"]["cutoff_hz"] == 2.0 and doc["options"]["order"] == 2
+    assert doc["u_squareness_bootstrap_urad"] is None
+
+
+def test_bad_run_is_one_line_and_the_others_still_count(tmp_path, capsys):
+    good, _ = _write(tmp_path, "good.mcap", density=1e-6)
+    bad, _ = _write(tmp_path, "bad.mcap", scale=4.0)
+    code = main(["analyze", str(bad), str(good), "--json", "--bootstrap", "0"])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert len(out.strip().splitlines()) == 1
+    error_lines = [line for line in err.splitlines() if "error" in line]
+    assert error_lines == [
+        f"imu-square analyze: error: {bad}: measured 0.40 m/s² but the program implies "
+        "0.10 m/s²: check the feed, the radius or the units"
+    ]
+
+
+def test_quality_warnings_are_shown(tmp_path, capsys):
+    slow = TestProgram(cycles_per_direction=3, dwell_s=1.0, feed_m_per_s=0.099)
+    rec, _ = synth_circle(slow, fs=100.0)
+    rec.program = PROG
+    path = tmp_path / "slow.mcap"
+    write_mcap(rec, path)
+    assert main(["analyze", str(path), "--bootstrap", "0"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: circle period differs from the program by +1.01%" in err
+
+
+def test_real_rectangle_through_import_and_analyze(tmp_path, capsys):
+    if not REALDATA.exists():
+        pytest.skip(f"{REALDATA} is not available")
+    program = tmp_path / "circle.toml"
+    program.write_text(
+        "[program]\nradius_mm = 100.0\nfeed_mm_per_min = 6000.0\ncycles_per_direction = 2\n"
+        "overshoot_deg = 0.0\ndwell_s = 2.0\n"
+    )
+    mcap = tmp_path / "rect.mcap"
+    cols = "t_s,ax_mps2,ay_mps2,az_mps2"
+    assert (
+        main(
+            ["import", str(REALDATA), "--program", str(program), "-o", str(mcap), "--columns", cols]
+        )
+        == 0
+    )
+    capsys.readouterr()
+    assert main(["analyze", str(mcap)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "no circular motion matching the program" in err[0]

@@ -1,0 +1,189 @@
+"""analyze() end to end on closed-form signals, the simulator and real data."""
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pipeline_synth import synth_circle
+
+from imu_square.errors import AnalysisError
+from imu_square.pipeline.squareness import AnalysisOptions, analyze
+from imu_square.pipeline.uncertainty import cramer_rao
+from imu_square.program import TestProgram
+from imu_square.recording import SensorInfo
+
+PROG = TestProgram(cycles_per_direction=4, dwell_s=1.0)
+FAST = AnalysisOptions(bootstrap_n=50, grid_points=256)
+REALDATA = Path("/work/shared/realdata/Inkering__printnoser__rectangle_1__accel.csv")
+
+
+def test_squareness_servo_and_rotation_from_closed_form():
+    alpha, beta, eps = 80e-6, -30e-6, math.radians(2.1)
+    tau_x, tau_y = 1e-3, 2e-3
+    rec, truth = synth_circle(
+        PROG, alpha=alpha, beta=beta, eps_c=eps, tau_x=tau_x, tau_y=tau_y, density=1e-7, fs=500.0
+    )
+    res = analyze(rec, FAST)
+    crb = cramer_rao(1e-7, 0.1, 8 * PROG.period_s)
+    assert abs(res.squareness_rad - (alpha + beta / math.cos(2 * eps))) < 0.2e-6 + 5 * crb
+    assert res.servo_mismatch_rad == pytest.approx(truth["servo_mismatch_rad"], rel=1e-3)
+    # eps_c within 0.1 deg and within its stated uncertainty (k = 3).
+    assert abs(res.eps_c_rad - eps) < min(math.radians(0.1), 3 * res.u_eps_c_rad)
+    # The paper's stage 2 sees nothing of a 2.1 deg rotation.
+    assert abs(res.eps_c_stage2_rad) < math.radians(0.01)
+    assert res.cycles_used == {"ccw": 4, "cw": 4}
+    # v^2/r, the low-pass's gain at the circle frequency taken out.
+    assert res.amp_x_m_s2 == pytest.approx(0.1, rel=1e-4)
+    assert res.amp_y_m_s2 == pytest.approx(0.1 * math.cos(beta), rel=1e-4)
+    # theta_x = -alpha + eps, theta_y = beta + eps (docs/model.md; lags cancel in the mean).
+    assert abs(res.theta_x_rad - (-alpha + eps)) < 2e-3
+    # Per direction: alpha + beta / cos(2 eps) + m (the rotation correction).
+    ccw = alpha + beta / math.cos(2 * eps) + truth["servo_mismatch_rad"]
+    assert abs(res.ccw.squareness_rad - ccw) < 0.2e-6 + 5 * crb
+
+
+def test_rotated_sensor_sees_squareness_times_cos_two_eps():
+    # Along a direction gamma the phase is gamma - alpha cos^2(gamma): rotated axes
+    # see theta_y - theta_x = alpha cos(2 eps). The result divides it out.
+    alpha, eps = 500e-6, math.radians(5.0)
+    rec, _ = synth_circle(PROG, alpha=alpha, eps_c=eps, tau_x=2e-3, density=1e-7, fs=500.0)
+    res = analyze(rec, FAST)
+    crb = cramer_rao(1e-7, 0.1, 8 * PROG.period_s)
+    raw = res.theta_y_rad - res.theta_x_rad
+    assert abs(raw - alpha * math.cos(2 * eps)) < 0.1e-6 + 5 * crb
+    assert abs(res.squareness_rad - alpha) < 0.1e-6 + 5 * crb
+    assert res.servo_mismatch_rad == pytest.approx(-2e-3, rel=1e-3)
+
+
+def test_uncertainties_are_near_the_noise_floor():
+    d = 6.86e-5  # 7 ug/sqrt(Hz), the paper's sensor
+    rec, _ = synth_circle(PROG, alpha=100e-6, density=d, fs=200.0, seed=5)
+    res = analyze(rec, FAST)
+    assert res.noise_density_source == "sensor"
+    crb = cramer_rao(d, 0.1, 8 * PROG.period_s)
+    assert res.crb_rad == pytest.approx(crb, rel=0.01)
+    assert abs(res.squareness_rad - 100e-6) < 4 * crb
+    # Type A from 4 pairs and the bootstrap scatter around the bound (chi with 3 dof).
+    assert 0.2 * crb < res.u_squareness_rad < 2.5 * crb
+    assert 0.3 * crb < res.u_squareness_bootstrap_rad < 2.0 * crb
+    # The noise density estimated from the data agrees with the truth.
+    assert res.quality["noise_density_residual_m_s2_rthz"] == pytest.approx(d, rel=0.1)
+    assert res.quality["warnings"] == []
+
+
+def test_amplitude_mismatch_is_refused_with_the_numbers():
+    rec, _ = synth_circle(PROG, fs=100.0, scale=4.0)
+    with pytest.raises(
+        AnalysisError,
+        match=r"^measured 0\.40 m/s² but the program implies 0\.10 m/s²: check the feed, "
+        r"the radius or the units$",
+    ):
+        analyze(rec, FAST)
+
+
+def _cycle_middle(block, k, ramp_s=0.5):
+    """Time of the middle of analysed cycle k of a synthetic block. [s]"""
+    return block["t0"] + ramp_s / 2 + (PROG.overshoot_rad + 2 * np.pi * (k + 0.5)) / 1.0
+
+
+def _with_gap(rec, t0_s, n_lost):
+    keep = np.ones(rec.n_samples, dtype=bool)
+    i0 = int(t0_s * rec.sample_rate_hz)
+    keep[i0 : i0 + n_lost] = False
+    return replace(rec, accel=rec.accel[keep], time_ns=rec.time_ns[keep], seq=rec.seq[keep])
+
+
+def test_gap_drops_the_cycle_and_says_so():
+    rec, truth = synth_circle(PROG, alpha=50e-6, fs=100.0, density=1e-7)
+    res = analyze(_with_gap(rec, _cycle_middle(truth["blocks"][0], 2), 5), FAST)
+    assert res.cycles_used == {"ccw": 3, "cw": 4}
+    assert res.quality["gaps"] == 1 and res.quality["lost_samples"] == 5
+    assert res.quality["cycles_dropped"][0]["reason"] == "gap or clipping"
+    assert any("1 cycle(s) dropped" in w for w in res.quality["warnings"])
+    assert abs(res.squareness_rad - 50e-6) < 1e-6
+
+
+def test_too_few_cycles_is_refused():
+    rec, truth = synth_circle(PROG, fs=100.0)
+    gappy = rec
+    for k in (0, 1, 2):
+        gappy = _with_gap(gappy, _cycle_middle(truth["blocks"][1], k), 3)
+    with pytest.raises(
+        AnalysisError, match=r"too few usable cycles: 4 CCW and 1 CW of 4 each, min_cycles=3"
+    ):
+        analyze(gappy, FAST)
+
+
+def test_clipping_drops_cycles():
+    rec, truth = synth_circle(PROG, fs=100.0)
+    acc = rec.accel.copy()
+    acc[int(_cycle_middle(truth["blocks"][0], 1) * 100), 0] = 20.0  # one sample at full scale
+    clipped = replace(rec, accel=acc, sensor=SensorInfo(range_m_s2=20.0))
+    res = analyze(clipped, FAST)
+    assert res.quality["clipped_samples"] == 1
+    assert res.cycles_used["ccw"] == 3
+    assert any("clipping" in w for w in res.quality["warnings"])
+
+
+def test_no_program_is_refused():
+    rec, _ = synth_circle(PROG, fs=100.0)
+    with pytest.raises(AnalysisError, match=r"has no test program: give one \(--program\)"):
+        analyze(replace(rec, program=None), FAST)
+
+
+def test_feed_override_is_flagged_or_refused():
+    slow = replace(PROG, feed_m_per_s=PROG.feed_m_per_s * 0.99)
+    rec, _ = synth_circle(slow, fs=100.0)
+    res = analyze(replace(rec, program=PROG), FAST)
+    assert res.quality["period_disagreement"] == pytest.approx(1 / 0.99 - 1, rel=1e-3)
+    assert any("period differs from the program by +1.01%" in w for w in res.quality["warnings"])
+    slower = replace(PROG, feed_m_per_s=PROG.feed_m_per_s * 0.9)
+    rec, _ = synth_circle(slower, fs=100.0)
+    with pytest.raises(AnalysisError, match=r"the circles take 6\.981 s but the program implies"):
+        analyze(replace(rec, program=PROG), FAST)
+
+
+def test_json_dict_has_the_documented_fields():
+    rec, _ = synth_circle(PROG, alpha=20e-6, fs=100.0, density=1e-6)
+    doc = json.loads(json.dumps(analyze(rec, FAST).to_json_dict()))
+    for key in (
+        "squareness_urad",
+        "u_squareness_urad",
+        "theta_x_rad",
+        "theta_y_rad",
+        "eps_c_deg",
+        "servo_mismatch_urad",
+        "quality",
+    ):
+        assert key in doc
+    assert doc["cycles_used"] == {"ccw": 4, "cw": 4}
+    assert doc["squareness_urad"] == pytest.approx(20.0, abs=3.0)
+
+
+def test_simulator_end_to_end_with_servo_and_spikes():
+    from imu_square.simulate import simulate_run
+    from imu_square.simulate.presets import with_effects
+
+    machine, sensor = with_effects(["servo_mismatch", "reversal_spikes"])
+    sensor = replace(sensor, noise_density_m_s2_rthz=1e-6, eps_c_rad=math.radians(2.1))
+    rec, truth = simulate_run(PROG, machine, sensor, seed=2)
+    res = analyze(rec, FAST)
+    crb = cramer_rao(1e-6, 0.1, 8 * PROG.period_s)
+    assert abs(res.squareness_rad - truth["squareness_rad"]) < 0.5e-6 + 4 * crb
+    assert res.servo_mismatch_rad == pytest.approx(truth["servo_mismatch_rad"], rel=0.05)
+    assert abs(res.eps_c_rad - truth["eps_c_rad"]) < math.radians(0.1)
+
+
+def test_real_rectangle_is_refused_in_one_line(tmp_path):
+    if not REALDATA.exists():
+        pytest.skip(f"{REALDATA} is not available")
+    from imu_square.csv_import import read_csv
+
+    program = TestProgram(cycles_per_direction=2, overshoot_rad=0.0, dwell_s=2.0)
+    rec = read_csv(REALDATA, program, columns=["t_s", "ax_mps2", "ay_mps2", "az_mps2"])
+    with pytest.raises(AnalysisError, match=r"no circular motion matching the program") as exc:
+        analyze(rec)
+    assert "\n" not in str(exc.value)
