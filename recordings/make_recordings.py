@@ -54,9 +54,9 @@ def make_all():
         argv = [
             "simulate",
             "--program",
-            str(CONFIG / "program_short.toml"),
+            str(CONFIG / "program_r25.toml"),
             "--sensor",
-            str(CONFIG / "sensor_adxl355_500hz.toml"),
+            str(CONFIG / "sensor_7ug_500hz.toml"),
             "-o",
             str(HERE / f"{name}.mcap"),
             *map(str, extra),

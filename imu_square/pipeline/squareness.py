@@ -73,6 +73,10 @@ class AnalysisOptions:
         Tuning constant of the norm, in robust-scale units; norm default if None.
     maxiter : int
         IRLS iteration limit.
+    freeze_scale_after : int
+        Iterations after which a fit that has not converged keeps its scale
+        fixed: statsmodels' algorithm until then, and a guaranteed descent after
+        (the median-based scale can otherwise make single noisy cycles cycle).
     conv : {"coefs", "dev"}
         IRLS convergence criterion. ``statsmodels``' default "dev" compares
         ``rho(resid / s2)`` with ``s2`` the residual *variance*, which for
@@ -95,7 +99,8 @@ class AnalysisOptions:
     order: int = 1
     norm: str = "tukey"
     tuning: float | None = None
-    maxiter: int = 50
+    maxiter: int = 200
+    freeze_scale_after: int = 50
     conv: str = "coefs"
     tol: float = 1e-10
     grid_points: int = 512
@@ -322,7 +327,12 @@ def analyze(recording, options=None, program=None):
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
     norm = robust_norm(opts.norm, opts.tuning)
-    irls = {"maxiter": opts.maxiter, "tol": opts.tol, "conv": opts.conv}
+    irls = {
+        "maxiter": opts.maxiter,
+        "tol": opts.tol,
+        "conv": opts.conv,
+        "freeze_scale_after": opts.freeze_scale_after,
+    }
     phi = cyc.phi_grid
     mean_x = np.stack([cyc.ccw.x.mean(axis=0), cyc.cw.x.mean(axis=0)])
     mean_y = np.stack([cyc.ccw.y.mean(axis=0), cyc.cw.y.mean(axis=0)])
