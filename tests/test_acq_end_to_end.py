@@ -1,0 +1,248 @@
+"""Emulated board -> pseudo-terminal -> `imu-square record` -> MCAP -> analysis.
+
+Every test runs the real emulator in a thread behind a real pty and the real
+``record`` command; the board streams 20 times faster than real time, so the
+16.6 s test takes about a second.
+"""
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+import warnings
+
+import numpy as np
+import pytest
+from acq_board import PROGRAM, assert_exact, running_board, write_inputs
+
+from acquisition.faults import DAMAGED, NO_HOST, SENT
+from acquisition.protocol import Parser, SampleBlock
+from acquisition.reader import open_port
+from imu_square.cli import main
+from imu_square.errors import ImuSquareWarning
+from imu_square.mcap_io import read_mcap
+from imu_square.pipeline.squareness import AnalysisOptions, analyze
+
+
+def record(tmp_path, *extra):
+    program, _ = write_inputs(tmp_path)
+    out = tmp_path / "run.mcap"
+    argv = ["record", "--port", str(tmp_path / "board"), "--program", str(program)]
+    code = main([*argv, "-o", str(out), *extra])
+    return code, out
+
+
+def events(recording, kind):
+    return [e for e in recording.events if e.kind == kind]
+
+
+def test_clean_run_is_exact_complete_and_gives_the_true_squareness(tmp_path, capsys):
+    with running_board(tmp_path) as (board, truth):
+        code, out = record(tmp_path, "--until-done", "--trigger", "motion")
+    assert code == 0, capsys.readouterr().err
+    rec = read_mcap(out)
+    assert_exact(rec, board)
+    assert rec.lost_samples == 0
+    assert rec.program == PROGRAM
+    assert rec.sensor.resolution_m_s2 == board.header.scale_m_s2_per_count
+
+    # The motion trigger fires within 0.2 s after the true start of motion, and the
+    # pre-trigger buffer keeps the rest before it (3 s, all the lead-in there is).
+    dt_s = board.header.dt_ns * 1e-9
+    start_seq = board.seq[0] + truth["blocks"][0]["start_s"] / dt_s
+    (run_start,) = events(rec, "run_start")
+    trigger_seq = rec.seq[0] + (run_start.time_ns - rec.time_ns[0]) / board.header.dt_ns
+    assert 0 <= (trigger_seq - start_seq) * dt_s < 0.2
+    assert rec.seq[0] == board.seq[0]
+    # --until-done stops 2 s after the last block_end marker.
+    end_seq = board.seq[0] + np.ceil(truth["blocks"][-1]["end_s"] / dt_s)
+    assert rec.seq[-1] == end_seq + round(2.0 / dt_s) - 1
+    kinds = [(e.kind, e.direction, e.block) for e in rec.events if e.kind.startswith("block")]
+    assert kinds == [
+        ("block_start", "ccw", 0),
+        ("block_end", "ccw", 0),
+        ("block_start", "cw", 1),
+        ("block_end", "cw", 1),
+    ]
+
+    # Three cycles per direction: no bootstrap over so few cycles, and the type A
+    # scatter of three pairs is no better known than the Cramer-Rao bound (~70 urad).
+    result = analyze(rec, AnalysisOptions(bootstrap_n=0))
+    u = max(result.u_squareness_rad, result.crb_rad)
+    assert 0 < u < 150e-6
+    assert abs(result.squareness_rad - truth["squareness_rad"]) < 3 * u
+
+
+def test_marker_trigger_starts_at_the_first_block_marker(tmp_path, capsys):
+    with running_board(tmp_path, seq_start=123) as (board, truth):
+        code, out = record(tmp_path, "--trigger", "marker", "--pretrigger", "1", "--duration", "4")
+    assert code == 0
+    rec = read_mcap(out)
+    assert_exact(rec, board)
+    (run_start,) = events(rec, "run_start")
+    first_block = next(e for e in rec.events if e.kind == "block_start")
+    assert run_start.time_ns == first_block.time_ns
+    trigger_seq = rec.seq[0] + (run_start.time_ns - rec.time_ns[0]) // board.header.dt_ns
+    dt_s = board.header.dt_ns * 1e-9
+    assert trigger_seq == board.seq[0] + np.ceil(truth["blocks"][0]["start_s"] / dt_s)
+    assert rec.seq[0] == trigger_seq - 1000, "1 s kept before the trigger"
+    assert rec.seq[-1] == trigger_seq + 4000 - 1, "4 s of board time after it"
+
+
+def test_every_injected_fault_is_detected_and_no_bad_sample_is_stored(tmp_path, capsys):
+    faults = "corrupt=0.0003,drop=0.0003,garbage=4"
+    with running_board(tmp_path, faults=faults, seq_start=2**32 - 5000) as (board, _):
+        code, out = record(tmp_path, "--until-done")
+    assert code == 3, "an incomplete run has its own exit code"
+    assert "incomplete recording" in capsys.readouterr().err
+    rec = read_mcap(out)
+    log = board.log
+    # The file spans the 32-bit wrap of the board's counter.
+    assert rec.seq[0] < 2**32 < rec.seq[-1]
+    assert_exact(rec, board)
+    stored = set(rec.seq.tolist())
+    assert stored <= set(log.seqs(SENT).tolist())
+    assert stored.isdisjoint(log.seqs(DAMAGED).tolist())
+
+    # Samples in the file == samples sent over its span - samples reported lost.
+    gaps = events(rec, "gap")
+    reported_lost = sum(int(e.detail.removeprefix("lost=")) for e in gaps)
+    span = rec.seq[-1] - rec.seq[0] + 1
+    assert rec.n_samples == span - reported_lost
+    damaged = np.asarray(log.seqs(DAMAGED))
+    damaged_in_span = damaged[(damaged > rec.seq[0]) & (damaged < rec.seq[-1])]
+    assert damaged_in_span.size > 0
+    assert reported_lost == damaged_in_span.size, "only damaged frames were lost"
+
+    # Each damaged frame and each garbage burst is one rejected chunk at least.
+    frames = np.asarray(log.seq0)
+    fate = np.asarray(log.fate)
+    n_damaged = np.sum((fate == DAMAGED) & (frames > rec.seq[0]) & (frames < rec.seq[-1]))
+    n_garbage = sum(rec.seq[0] < s <= rec.seq[-1] for s, _ in log.garbage_bursts)
+    assert n_garbage > 0
+    crc = sum(int(e.detail.removeprefix("count=")) for e in events(rec, "crc_error"))
+    assert crc >= n_damaged + n_garbage
+    (run_end,) = events(rec, "run_end")
+    assert f"crc_errors={crc}," in run_end.detail
+    assert f"lost={reported_lost}," in run_end.detail
+
+
+def test_line_mode_with_faults_is_exact(tmp_path, capsys):
+    # One line per sample: 3 kHz of lines keeps the board and the recorder (one process,
+    # one GIL) ahead of the stream.
+    faults = "corrupt=0.0005,garbage=2"
+    with running_board(tmp_path, faults=faults, mode="line", speed=3.0) as (board, _):
+        code, out = record(tmp_path, "--duration", "4")
+    assert code == 3
+    rec = read_mcap(out)
+    assert_exact(rec, board)
+    assert set(rec.seq.tolist()).isdisjoint(board.log.seqs(DAMAGED).tolist())
+    assert rec.seq[-1] - rec.seq[0] + 1 == 4000, "--duration counts board time"
+    lost = sum(int(e.detail.removeprefix("lost=")) for e in events(rec, "gap"))
+    assert rec.n_samples == 4000 - lost > 3500
+
+
+def test_unplugging_leaves_one_gap_of_the_right_length(tmp_path, capsys):
+    with running_board(tmp_path, faults="disconnect=6:2") as (board, _):
+        code, out = record(tmp_path, "--until-done")
+    assert code == 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ImuSquareWarning)
+        rec = read_mcap(out)  # a valid, finished file: no warning
+    assert_exact(rec, board)
+    ((first_lost, n_lost),) = board.log.disconnects
+    assert n_lost >= 2000, "2 s of board time at 1 kHz, plus the time to reconnect"
+    ((index, lost),) = rec.gaps()
+    assert (rec.seq[index - 1] + 1, lost) == (first_lost, n_lost)
+    (gap,) = events(rec, "gap")
+    assert gap.detail == f"lost={n_lost}"
+    (reconnect,) = events(rec, "reconnect")
+    assert reconnect.time_ns == rec.time_ns[index]
+    assert set(board.log.seqs(NO_HOST).tolist()) >= set(range(first_lost, first_lost + n_lost))
+
+
+@pytest.mark.slow
+def test_kill_9_loses_at_most_the_last_second(tmp_path, capsys):
+    program, _ = write_inputs(tmp_path)
+    out = tmp_path / "run.mcap"
+    cmd = [
+        os.path.join(os.path.dirname(sys.executable), "imu-square"),
+        "record",
+        "--port",
+        str(tmp_path / "board"),
+        "--program",
+        str(program),
+        "-o",
+        str(out),
+        "--duration",
+        "60",
+    ]
+    with running_board(tmp_path, speed=1.0) as (board, _):
+        proc = subprocess.Popen(cmd, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 30
+        while sum(board.log.n) < 4000 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(proc.pid, signal.SIGKILL)
+        n_frames = len(board.log.seq0)
+        proc.wait(10)
+    sent = [
+        s
+        for s, n, f in zip(board.log.seq0[:n_frames], board.log.n, board.log.fate, strict=False)
+        if f == SENT
+    ]
+    last_sent = sent[-1] + board.log.n[n_frames - 1] - 1
+    assert proc.returncode == -signal.SIGKILL
+
+    fixed = tmp_path / "fixed.mcap"
+    capsys.readouterr()
+    assert main(["recover", str(out), "-o", str(fixed)]) == 0
+    said = capsys.readouterr().err
+    assert re.search(r"recovered \d+ samples .* cut at byte \d+", said), said
+    rec = read_mcap(fixed)
+    assert_exact(rec, board)
+    assert rec.lost_samples == 0
+    lost_s = (last_sent - rec.seq[-1]) * board.header.dt_ns * 1e-9
+    # Flushed (chunk closed and fsynced) every second of host time; a little more for
+    # the frames in flight in the pty and the reader queue.
+    assert 0 <= lost_s <= 1.2
+    assert rec.n_samples >= 2500
+
+
+def test_emulate_command_writes_truth_and_fault_log(tmp_path, capsys):
+    program, machine = write_inputs(tmp_path)
+    link = tmp_path / "board"
+    argv = ["emulate", "--program", str(program), "--machine", str(machine), "--link", str(link)]
+    argv += ["--speed", "50", "--seed", "3", "--faults", "drop=0.001,clock_ppm=50"]
+    received = bytearray()
+
+    def host():  # reads until the board falls silent, then lets go of the port
+        deadline = time.monotonic() + 10
+        while not link.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        port = open_port(str(link), 921600, 0.3)
+        port.write(b"?\n")
+        while chunk := port.read(65536):
+            received.extend(chunk)
+        port.close()
+
+    reader = threading.Thread(target=host)
+    reader.start()
+    assert main(argv) == 0
+    reader.join(10)
+    printed = capsys.readouterr().out.strip()
+    assert printed == str(link) + ".truth.json"
+    truth = json.loads(open(printed, encoding="utf-8").read())
+    assert truth["clock_ppm"] == 50.0
+    assert truth["effects"]["sample_clock_error"] == {"ppm": 50.0}
+    summary = truth["emulator"]["log"]["summary"]
+    assert summary["bytes_dropped"] > 0
+    assert summary["samples_sent"] + summary["samples_damaged"] == truth["n_samples"]
+    parser = Parser()
+    blocks = [m for m in parser.feed(bytes(received)) if isinstance(m, SampleBlock)]
+    assert sum(b.n_samples for b in blocks) == summary["samples_sent"]
+    assert parser.stats.crc_errors == summary["frames_damaged"]
+    assert not link.exists(), "the board removes its link when done"
