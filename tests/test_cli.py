@@ -11,7 +11,10 @@ from imu_square.cli import build_parser, main
 def test_every_subcommand_is_registered():
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
-    assert {"program", "simulate", "import", "info", "recover", "reference"} <= set(sub.choices)
+    assert {"program", "simulate", "import", "info", "recover", "reference", "analyze"} <= set(
+        sub.choices
+    )
+    assert {"record", "emulate", "nightly"} <= set(sub.choices)
 
 
 def test_no_command_prints_help_and_fails(capsys):
