@@ -67,8 +67,20 @@ def test_bad_samples_drop_whole_cycles():
     b = truth["blocks"][1]
     # Middle of the CW block's middle analysed cycle.
     t_bad = 0.5 * (b["t0"] + b["t1"])
-    cyc = _traces(rec, bad=[t_bad])
+    cyc = _traces(rec, bad=[(t_bad, t_bad)])
     assert cyc.ccw.n == 3 and cyc.cw.n == 2
     assert cyc.dropped == (
         {"direction": "cw", "block": 1, "cycle": 1, "reason": "gap or clipping"},
     )
+
+
+def test_a_gap_longer_than_a_cycle_drops_every_cycle_it_touches():
+    rec, truth = synth_circle(PROG, fs=200.0)
+    b = truth["blocks"][0]
+    period = PROG.period_s
+    # Data missing from 0.6 to 2.1 periods into the analysed cycles: the gap's
+    # midpoint lies in cycle 1 only, but cycles 0 and 2 hold its ends.
+    start = b["t0"] + PROG.overshoot_rad / PROG.omega_rad_s + 0.6 * period
+    cyc = _traces(rec, bad=[(start, start + 1.5 * period)])
+    assert cyc.ccw.n == 0 and cyc.cw.n == 3
+    assert {d["cycle"] for d in cyc.dropped if d["direction"] == "ccw"} == {0, 1, 2}

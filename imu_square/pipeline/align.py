@@ -73,7 +73,7 @@ class CycleTraces:
     dropped: tuple
 
 
-def cycle_traces(t_s, accel_xy, seg, bad_times_s=(), margin_s=0.0, grid_points=512):
+def cycle_traces(t_s, accel_xy, seg, bad_intervals_s=(), margin_s=0.0, grid_points=512):
     """Flip, cut and resample every analysed cycle on a common phi grid.
 
     Parameters
@@ -84,9 +84,11 @@ def cycle_traces(t_s, accel_xy, seg, bad_times_s=(), margin_s=0.0, grid_points=5
         Low-passed sensor x and y acceleration. [m/s^2]
     seg : Segmentation
         The blocks and the time-to-angle map.
-    bad_times_s : ndarray, shape (n_bad,)
-        Times of gaps and clipped samples; a cycle within ``margin_s`` of one
-        is dropped. [s]
+    bad_intervals_s : array_like, shape (n_bad, 2)
+        Start and end of each stretch of bad data: a gap runs from the last
+        sample before it to the first after it, a clipped sample is a zero-length
+        stretch. A cycle that comes within ``margin_s`` of one is dropped; a gap
+        can be longer than a cycle, so whole stretches are checked, not points. [s]
     margin_s : float
         Settling time of the filter. [s]
     grid_points : int
@@ -100,7 +102,7 @@ def cycle_traces(t_s, accel_xy, seg, bad_times_s=(), margin_s=0.0, grid_points=5
     n_cyc = prog.cycles_per_direction
     two_pi = 2 * np.pi
     grid = two_pi * (np.arange(grid_points) + 0.5) / grid_points
-    bad = np.sort(np.asarray(bad_times_s, dtype=np.float64))
+    bad = np.asarray(bad_intervals_s, dtype=np.float64).reshape(-1, 2)
     out = {"ccw": [], "cw": []}
     dropped = []
     seen = {"ccw": 0, "cw": 0}
@@ -132,8 +134,7 @@ def cycle_traces(t_s, accel_xy, seg, bad_times_s=(), margin_s=0.0, grid_points=5
             elif c0 < t_s[0] or c1 > t_s[-1]:
                 reason = "outside the recording"
             else:
-                h0, h1 = np.searchsorted(bad, [c0 - margin_s, c1 + margin_s])
-                if h1 > h0:
+                if np.any((bad[:, 0] <= c1 + margin_s) & (bad[:, 1] >= c0 - margin_s)):
                     reason = "gap or clipping"
             if reason:
                 dropped.append(

@@ -320,8 +320,8 @@ def analyze(recording, options=None, program=None):
     q.check_period(seg.period_disagreement, seg.period_s, prog)
 
     clipped = q.clipped_times(t_s, raw, recording.sensor.range_m_s2)
-    gap_times = np.array([0.5 * (t_s[i - 1] + t_s[i]) for i in breaks])
-    bad = np.concatenate([clipped, gap_times])
+    gap_spans = [(t_s[i - 1], t_s[i]) for i in breaks]
+    bad = np.array([*gap_spans, *((t, t) for t in clipped)]).reshape(-1, 2)
     margin = settling_time_s(opts.cutoff_hz, opts.order)
     cyc = cycle_traces(t_s, xy, seg, bad, margin, opts.grid_points)
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
