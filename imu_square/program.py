@@ -24,9 +24,9 @@ where the previous block ended; only the middle whole cycles are analysed.
 import math
 import tomllib
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 from imu_square.errors import ProgramError
+from imu_square.textfile import read_text
 
 DIRECTIONS = ("ccw", "cw")
 SUPPORTED_PLANES = ("XY",)
@@ -438,14 +438,7 @@ def read_program(path):
     -------
     TestProgram
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ProgramError(f"{path}: program file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ProgramError(f"{path}: cannot read the program file: {exc}") from None
-    return parse_program(text, str(path))
+    return parse_program(read_text(path, ProgramError, "program file"), str(path))
 
 
 def default_program():

@@ -7,9 +7,9 @@ never silently leaves an effect off.
 
 import math
 import tomllib
-from pathlib import Path
 
 from imu_square.errors import ConfigError
+from imu_square.textfile import read_text
 
 
 def load_toml(path):
@@ -24,13 +24,7 @@ def load_toml(path):
     -------
     dict
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read: {exc}") from None
+    text = read_text(path, ConfigError)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
