@@ -78,9 +78,16 @@ class SampleStream:
         n = len(counts)
         lost = 0
         if self.last_seq is not None:
-            if seq0 <= self.last_seq:
+            if seq0 + n - 1 <= self.last_seq:
                 self.stale += 1  # counted per run: one stale frame, or a repeated stretch
                 return None, None, None, 0
+            if seq0 <= self.last_seq:
+                # A repeated frame joined to new ones: keep the new samples only.
+                self.stale += 1
+                skip = self.last_seq + 1 - seq0
+                seq0, counts = seq0 + skip, counts[skip:]
+                temperature_c = np.asarray(temperature_c)[skip:]
+                n -= skip
             lost = seq0 - self.last_seq - 1
         self.last_seq = seq0 + n - 1
         self.lost += lost

@@ -341,3 +341,16 @@ def test_emulate_refuses_to_replace_a_file(tmp_path, capsys):
     assert precious.read_text() == "keep me"
     assert main(["emulate", "--program", str(program), "--link", str(tmp_path / "no/x")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_a_repeated_frame_joined_to_new_ones_keeps_the_new_samples():
+    s = SampleStream(1e-3)
+    s.push(0, np.zeros((25, 3), np.int32), np.full(25, np.nan))
+    s.push(25, np.zeros((25, 3), np.int32), np.full(25, np.nan))
+    # One read: frame 25 again, then the new frames 50 and 75, joined into one run.
+    counts = np.arange(75 * 3, dtype=np.int32).reshape(75, 3)
+    seq, accel, temperature, lost = s.push(25, counts, np.full(75, np.nan))
+    assert seq.tolist() == list(range(50, 100)) and lost == 0
+    np.testing.assert_array_equal(accel, (counts[25:] * 1e-3).astype(np.float32))
+    assert temperature.shape == (50,)
+    assert (s.stale, s.lost, s.last_seq) == (1, 0, 99)

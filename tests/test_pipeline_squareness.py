@@ -187,3 +187,30 @@ def test_real_rectangle_is_refused_in_one_line(tmp_path):
     with pytest.raises(AnalysisError, match=r"no circular motion matching the program") as exc:
         analyze(rec)
     assert "\n" not in str(exc.value)
+
+
+def test_gap_at_a_start_of_motion_is_refused():
+    # The anchor of a block is the middle of its motion: a gap where the motion
+    # starts leaves it unknown (it used to give eps_c tens of degrees off).
+    rec, truth = synth_circle(PROG, alpha=50e-6, fs=100.0, density=1e-7)
+    start = truth["blocks"][1]["t0"]
+    with pytest.raises(
+        AnalysisError, match=r"block 1 \(cw\): its start of motion .* next to a gap"
+    ):
+        analyze(_with_gap(rec, start + 0.3, 30), FAST)
+
+
+@pytest.mark.parametrize("eps_deg", [179.98, 180.0, -179.98])
+def test_sensor_turned_half_a_turn_keeps_its_sign(eps_deg):
+    # theta_x and theta_y straddle +-pi: their mean must be +-pi, not 0.
+    eps = math.radians(eps_deg)
+    rec, _ = synth_circle(PROG, alpha=50e-6, eps_c=eps, tau_x=1e-3, density=1e-7, fs=500.0)
+    res = analyze(rec, FAST)
+    assert abs(math.remainder(res.eps_c_rad - eps, 2 * math.pi)) < math.radians(0.01)
+    assert abs(res.squareness_rad - 50e-6) < 1e-6
+
+
+def test_sensor_near_45_degrees_is_refused():
+    rec, _ = synth_circle(PROG, alpha=50e-6, eps_c=math.radians(40.0), density=1e-7, fs=200.0)
+    with pytest.raises(AnalysisError, match=r"turned 40\.0 deg .* within 30 deg of square"):
+        analyze(rec, FAST)

@@ -343,8 +343,13 @@ class CircleFit:
 
     @property
     def mean_phase(self):
-        """``(theta_x + theta_y) / 2``, the sensor rotation when phi is anchored. [rad]"""
-        return 0.5 * (self.theta_x + self.theta_y)
+        """``(theta_x + theta_y) / 2``, the sensor rotation when phi is anchored. [rad]
+
+        Taken as ``theta_x`` plus half the wrapped difference, so that a sensor
+        turned by about 180 deg (thetas either side of +-pi) averages to +-pi, not 0.
+        """
+        half = 0.5 * (np.mod(self.theta_y - self.theta_x + np.pi, 2 * np.pi) - np.pi)
+        return np.mod(self.theta_x + half + np.pi, 2 * np.pi) - np.pi
 
 
 def _phase(a, b, cov, da, db):

@@ -239,7 +239,17 @@ def _select(intervals, t_start, t_stop, senses, blocks, events_t, nominal):
     return best
 
 
-def segment(t_s, accel_xy, program, events=()):
+def _gap_near(t, tc, guard_s):
+    """The (start, end) of a gap in the sample times within ``guard_s`` of ``tc``, or None."""
+    i0 = max(int(np.searchsorted(t, tc - guard_s)) - 1, 0)
+    i1 = min(int(np.searchsorted(t, tc + guard_s)) + 1, t.size)
+    steps = np.diff(t[i0:i1])
+    dt = float(np.median(np.diff(t[: min(t.size, 1000)])))
+    big = np.flatnonzero(steps > 1.5 * dt)
+    return None if big.size == 0 else (float(t[i0 + big[0]]), float(t[i0 + big[0] + 1]))
+
+
+def segment(t_s, accel_xy, program, events=(), guard_s=0.0):
     """Find the program's blocks in low-passed horizontal acceleration.
 
     Parameters
@@ -253,6 +263,9 @@ def segment(t_s, accel_xy, program, events=()):
     events : sequence of tuple (float, str, int)
         ``(time_s, kind, block)`` of ``block_start`` / ``block_end`` markers,
         time from the first sample; optional.
+    guard_s : float
+        A gap in the samples within this time of a block's start or stop of
+        motion makes that block's anchor unknown: refused. [s]
 
     Returns
     -------
@@ -343,6 +356,14 @@ def segment(t_s, accel_xy, program, events=()):
                 f"{'start' if s0 == 0.0 else 'end'} of the recording: its motion midpoint, "
                 f"which anchors the position angle, is unknown"
             )
+        for label, tc in (("start", t0), ("stop", t1)):
+            gap = _gap_near(t_s, tc, guard_s + 0.1 * program.period_s)
+            if gap is not None:
+                raise AnalysisError(
+                    f"block {plan.index} ({plan.direction}): its {label} of motion at "
+                    f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), so "
+                    f"the motion midpoint that anchors the position angle is unknown"
+                )
         # Envelope noise over its slope at each crossing, and the sampling grid
         # (an onset between two samples is placed uniformly within dt).
         quant = np.median(np.diff(t_s)) / np.sqrt(12)

@@ -53,6 +53,8 @@ from imu_square.pipeline.uncertainty import (
 _EXCESS_NOISE_FLAG = 3.0
 # Flag when more than this fraction of the averaged trace gets zero robust weight.
 _OUTLIER_FLAG = 0.05
+# Refuse a sensor turned within 15 deg of 45 deg to the axes (|cos 2 eps_c| < 0.5).
+MIN_COS_2EPS = 0.5
 # Flag when the circle period departs from the program's by more than this.
 _PERIOD_FLAG = 0.005
 
@@ -316,13 +318,13 @@ def analyze(recording, options=None, program=None):
         for e in recording.events
         if e.kind in ("block_start", "block_end")
     ]
-    seg = segment(t_s, xy, prog, events)
+    margin = settling_time_s(opts.cutoff_hz, opts.order)
+    seg = segment(t_s, xy, prog, events, guard_s=margin)
     q.check_period(seg.period_disagreement, seg.period_s, prog)
 
     clipped = q.clipped_times(t_s, raw, recording.sensor.range_m_s2)
     gap_spans = [(t_s[i - 1], t_s[i]) for i in breaks]
     bad = np.array([*gap_spans, *((t, t) for t in clipped)]).reshape(-1, 2)
-    margin = settling_time_s(opts.cutoff_hz, opts.order)
     cyc = cycle_traces(t_s, xy, seg, bad, margin, opts.grid_points)
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
@@ -346,6 +348,13 @@ def analyze(recording, options=None, program=None):
     eps_c = _circmean(main.mean_phase[0], main.mean_phase[1])
     # Seen through sensor axes rotated by eps_c, the machine's terms shrink:
     # theta_y - theta_x = beta + (alpha + m) cos(2 eps_c) (module docstring).
+    if abs(math.cos(2 * eps_c)) < MIN_COS_2EPS:
+        raise AnalysisError(
+            f"the sensor is turned {math.degrees(eps_c):.1f} deg from the machine's axes: near "
+            f"45 deg the machine's squareness is seen scaled by cos(2 eps_c) = "
+            f"{math.cos(2 * eps_c):.2f} and the sensor's own terms swamp it; mount the sensor "
+            f"within 30 deg of square to the X and Y axes"
+        )
     rotation = 1.0 / math.cos(2 * eps_c)
     sq_dir = _wrap(main.squareness) * rotation
     squareness = 0.5 * float(sq_dir[0] + sq_dir[1])

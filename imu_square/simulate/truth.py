@@ -68,7 +68,8 @@ def _exact_theta_diff(program, machine, alpha_beta_t, eps):
     c, s = math.cos(eps), math.sin(eps)
     n = np.array([[c, s], [-s, c]]) @ m
     ny = -math.sin(beta) * n[0] + math.cos(beta) * n[1]
-    return math.atan2(-ny[0], ny[1]) - math.atan2(n[0, 1], n[0, 0])
+    diff = math.atan2(-ny[0], ny[1]) - math.atan2(n[0, 1], n[0, 0])
+    return math.remainder(diff, 2 * math.pi)  # both phases can straddle +-pi
 
 
 def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
