@@ -30,8 +30,7 @@ import numpy as np
 
 from imu_square.errors import RecordingError, check_option
 from imu_square.recording import AXES, Event, Recording, SensorInfo
-
-G = 9.80665  # standard gravity [m/s^2]
+from imu_square.units import G
 
 FORMATS = {
     # name: (expected columns, unit name, factor to m/s^2, comment-prefixed header)

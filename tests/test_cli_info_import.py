@@ -144,3 +144,45 @@ def test_installed_script_prints_json(tmp_path, program):
         [str(script), "info", str(out), "--json"], capture_output=True, text=True, check=True
     )
     assert json.loads(result.stdout)["samples"] == 300
+
+
+def test_import_with_a_range_lets_the_analysis_see_clipping(tmp_path, capsys):
+    from imu_square.program import read_program
+    from imu_square.simulate import simulate_run
+
+    prog_path = tmp_path / "p.toml"
+    prog_path.write_text(
+        "[program]\nradius_mm = 25.0\nfeed_mm_per_min = 9000.0\ncycles_per_direction = 6\n"
+    )
+    rec, _ = simulate_run(read_program(prog_path), seed=1)
+    accel = rec.accel.astype(np.float64)
+    t = rec.time_s
+    # A saturating burst of 20 samples (2 g on x) in the CW block (it runs 12.5-19.9 s).
+    i = int(np.searchsorted(t, 14.0))
+    accel[i : i + 20, 0] = 2 * 9.80665
+    csv = tmp_path / "run.csv"
+    rows = "\n".join(
+        f"{ts:.6f},{x:.6f},{y:.6f},{z:.6f}" for ts, (x, y, z) in zip(t, accel, strict=True)
+    )
+    csv.write_text("time_s,accel_x,accel_y,accel_z\n" + rows + "\n")
+    used = {}
+    for extra in ([], ["--range-g", "2"]):
+        out = tmp_path / f"run{len(extra)}.mcap"
+        argv = ["import", str(csv), "--program", str(prog_path), "-o", str(out), *extra]
+        assert main(argv) == 0
+        capsys.readouterr()
+        assert main(["analyze", str(out), "--json"]) == 0
+        used[bool(extra)] = json.loads(capsys.readouterr().out)["cycles_used"]
+    assert read_mcap(out).sensor.range_m_s2 == pytest.approx(2 * 9.80665)
+    # Without the range the burst is invisible; with it, the cycles it touches (the
+    # burst plus the filter's settling time) are dropped.
+    assert used[False] == {"ccw": 6, "cw": 6}
+    assert used[True]["ccw"] == 6 and 4 <= used[True]["cw"] <= 5
+
+
+def test_import_refuses_a_nonsense_range(tmp_path, program, capsys):
+    csv = tmp_path / "x.csv"
+    csv.write_text("time_s,accel_x,accel_y,accel_z\n0,0,0,9.81\n0.001,0,0,9.81\n")
+    argv = ["import", str(csv), "--program", str(program), "-o", str(tmp_path / "x.mcap")]
+    assert main([*argv, "--range-g", "-1"]) == 2
+    assert "--range-g must be a number > 0, got -1.0" in capsys.readouterr().err

@@ -1,10 +1,14 @@
 """``imu-square import``: convert a CSV recording into an MCAP recording."""
 
+import math
 import sys
 
 from imu_square.csv_import import FORMATS, GRAVITY_AXES, read_csv
+from imu_square.errors import ImuSquareError
 from imu_square.mcap_io import write_mcap
 from imu_square.program import read_program
+from imu_square.recording import SensorInfo
+from imu_square.units import G
 
 
 def register(sub):
@@ -35,6 +39,19 @@ def register(sub):
         metavar="TIME,X,Y,Z[,TEMP]",
         help="header names of the columns to use, for a file with other column names",
     )
+    p.add_argument(
+        "--range-g",
+        type=float,
+        help="the sensor's full-scale range in g: samples at it are clipped and the analysis "
+        "drops their cycles (default: unknown, so clipping cannot be detected)",
+    )
+    p.add_argument(
+        "--noise-ug",
+        type=float,
+        help="the sensor's white-noise density in ug/sqrt(Hz), for the noise floor "
+        "(default: estimated from the data)",
+    )
+    p.add_argument("--sensor-model", default="unknown", help="sensor model, e.g. ADXL355")
     p.add_argument("--machine-id", default="", help="machine the test ran on")
     p.set_defaults(func=run)
 
@@ -43,6 +60,16 @@ def run(args):
     """Import the CSV and write the MCAP file."""
     program = read_program(args.program)
     columns = None if args.columns is None else [c.strip() for c in args.columns.split(",")]
+    for name in ("range_g", "noise_ug"):
+        value = getattr(args, name)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise ImuSquareError(f"--{name.replace('_', '-')} must be a number > 0, got {value!r}")
+    nan = float("nan")
+    sensor = SensorInfo(
+        model=args.sensor_model,
+        range_m_s2=nan if args.range_g is None else args.range_g * G,
+        noise_density_m_s2_rthz=nan if args.noise_ug is None else args.noise_ug * 1e-6 * G,
+    )
     recording = read_csv(
         args.csv,
         program,
@@ -50,6 +77,7 @@ def run(args):
         gravity_axis=args.gravity_axis,
         machine_id=args.machine_id,
         columns=columns,
+        sensor=sensor,
     )
     write_mcap(recording, args.output)
     gaps = recording.gaps()

@@ -25,7 +25,8 @@ from dataclasses import replace
 
 from imu_square.errors import ConfigError
 from imu_square.simulate.machine import MachineModel
-from imu_square.simulate.sensor import G, SensorModel
+from imu_square.simulate.sensor import SensorModel
+from imu_square.units import G
 
 EFFECTS = (
     "servo_mismatch",

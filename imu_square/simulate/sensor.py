@@ -38,8 +38,8 @@ import numpy as np
 
 from imu_square.errors import ConfigError
 from imu_square.simulate.config import Sections, load_toml
+from imu_square.units import G
 
-G = 9.80665
 UG = 1e-6 * G
 
 

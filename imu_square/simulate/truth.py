@@ -45,7 +45,7 @@ import math
 
 import numpy as np
 
-from imu_square.simulate.sensor import G
+from imu_square.units import G
 
 
 def _gravity_phases(program, machine):
