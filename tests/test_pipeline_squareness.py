@@ -214,3 +214,18 @@ def test_sensor_near_45_degrees_is_refused():
     rec, _ = synth_circle(PROG, alpha=50e-6, eps_c=math.radians(40.0), density=1e-7, fs=200.0)
     with pytest.raises(AnalysisError, match=r"turned 40\.0 deg .* within 30 deg of square"):
         analyze(rec, FAST)
+
+
+def test_a_type_a_uncertainty_below_the_noise_floor_is_flagged():
+    # Three cycle pairs give a scatter that is itself very uncertain: among a few
+    # seeds, some come out far below the bound, and those must say so.
+    prog = TestProgram(cycles_per_direction=3, dwell_s=1.0)
+    flagged = 0
+    for seed in range(8):
+        rec, _ = synth_circle(prog, alpha=50e-6, density=7e-5, fs=200.0, seed=seed)
+        res = analyze(rec, FAST)
+        low = res.u_squareness_rad < 0.5 * res.crb_rad
+        said = any("only" in w and "white-noise bound" in w for w in res.quality["warnings"])
+        assert low == said
+        flagged += low
+    assert flagged >= 1

@@ -51,6 +51,8 @@ from imu_square.pipeline.uncertainty import (
 
 # Flag when the type A uncertainty exceeds the white-noise bound by this factor.
 _EXCESS_NOISE_FLAG = 3.0
+# Below half the Cramer-Rao bound the cycle scatter has come out low by chance.
+_SCANT_SCATTER_FLAG = 0.5
 # Flag when more than this fraction of the averaged trace gets zero robust weight.
 _OUTLIER_FLAG = 0.05
 # Refuse a sensor turned within 15 deg of 45 deg to the axes (|cos 2 eps_c| < 0.5).
@@ -515,6 +517,13 @@ def _quality(recording, seg, cyc, clipped, ratio, outliers, u_sq, crb, d_resid, 
         warnings.append(
             f"{max(outliers):.1%} of the averaged trace rejected by the robust fit "
             f"(reversal spikes or vibration)"
+        )
+    if u_sq < _SCANT_SCATTER_FLAG * crb:
+        pairs = min(cyc.ccw.n, cyc.cw.n)
+        warnings.append(
+            f"the type A uncertainty is only {u_sq / crb:.2f} x the white-noise bound: from "
+            f"{pairs} cycle pairs the scatter is itself uncertain, and no estimate beats the "
+            f"bound; quote at least {crb * 1e6:.1f} um/m"
         )
     if u_sq > _EXCESS_NOISE_FLAG * crb:
         warnings.append(
