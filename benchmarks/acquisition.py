@@ -40,6 +40,7 @@ from acquisition.protocol import (  # noqa: E402
     encode_block,
     encode_header,
 )
+from imu_square.units import G  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "acquisition.json"
 REPEATS = 5
@@ -47,7 +48,6 @@ N_SAMPLES = 100_000
 SAMPLES_PER_FRAME = 25
 READ_SIZE = 4096  # bytes per serial read
 MAX_DEVICE_RATE_HZ = 4000.0
-G = 9.80665
 
 
 def _header(mode):

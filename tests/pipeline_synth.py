@@ -11,8 +11,7 @@ import numpy as np
 
 from imu_square.program import TestProgram
 from imu_square.recording import Event, Recording, SensorInfo
-
-G = 9.80665
+from imu_square.units import G
 
 
 def _angle(program, block, t, ramp_s):

@@ -9,11 +9,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 from imu_square.csv_import import read_csv
 from imu_square.errors import ImuSquareError, RecordingError
 from imu_square.program import TestProgram
+from imu_square.units import G
 
 REAL = Path("/work/shared/realdata")
 KLIPPER = REAL / "beattune-core__shaketune-cli-docker__raw_data_x_lis2dw_20260423_171429.HEAD50.csv"
 PHONE = REAL / "Inkering__printnoser__rectangle_1__accel.csv"
-G = 9.80665
+
 HEADER = "time_s,accel_x,accel_y,accel_z"
 
 

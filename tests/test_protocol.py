@@ -28,8 +28,8 @@ from acquisition.protocol import (
     unwrap_seq,
 )
 from imu_square.errors import AcquisitionError, ImuSquareError
+from imu_square.units import G
 
-G = 9.80665
 HEADER = DeviceHeader(
     model="ADXL355",
     serial="SN-0042",

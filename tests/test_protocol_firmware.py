@@ -20,11 +20,11 @@ from acquisition.protocol import (
     encode_header,
     encode_marker,
 )
+from imu_square.units import G
 
 FIRMWARE = Path(__file__).resolve().parents[1] / "acquisition" / "firmware"
 CC = shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
 CXX = shutil.which("c++") or shutil.which("g++") or shutil.which("clang++")
-G = 9.80665
 
 HEADER = DeviceHeader(
     model="ADXL355",
