@@ -5,7 +5,7 @@ thread reads the port and reconnects after every failure. The recorder parses
 the bytes, unwraps the board's sequence numbers (the time base: sample ``seq``
 is at ``t_start_ns + (seq - seq_first) * dt_ns`` on the board's clock), waits
 for the trigger while keeping a pre-trigger buffer, and streams samples and
-events to a :class:`~imu_square.mcap_io.RecordingWriter`, which it flushes
+events to a :class:`~imu_square.io.mcap.RecordingWriter`, which it flushes
 (chunk closed, fsync) every second, so a kill or a power cut loses at most
 the last second. A bad sample is never written or interpolated: damaged
 frames are dropped by the parser, counted, and leave a ``gap`` event with the
@@ -33,9 +33,9 @@ from acquisition.reader import SerialSupervisor
 from acquisition.stream import SampleStream
 from acquisition.trigger import make_trigger
 from imu_square.errors import AcquisitionError
+from imu_square.io.mcap import RecordingWriter
+from imu_square.io.recording import Event, SensorInfo
 from imu_square.log import logger
-from imu_square.mcap_io import RecordingWriter
-from imu_square.recording import Event, SensorInfo
 
 HEADER_TIMEOUT_S = 5.0
 HEADER_RETRY_S = 0.5

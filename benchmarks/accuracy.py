@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_square.io.recording import SensorInfo
 from imu_square.program import TestProgram
-from imu_square.recording import SensorInfo
 from imu_square.simulate import simulate_run
 from imu_square.simulate.presets import with_effects
 
@@ -210,7 +210,7 @@ def _reference_analyze(recording, options, fit_kwargs):
 
 def speed(repeats=5):
     """Median time from reading the MCAP file to the result, ours and the reference."""
-    from imu_square.mcap_io import read_mcap, write_mcap
+    from imu_square.io.mcap import read_mcap, write_mcap
     from imu_square.pipeline.squareness import AnalysisOptions, analyze
 
     machine, sensor = with_effects(["servo_mismatch", "reversal_spikes"])

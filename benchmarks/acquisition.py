@@ -125,7 +125,7 @@ RECORDER_BLOCK = 25  # samples per write_samples call, as a binary frame deliver
 
 def bench_writer(args):
     """MCAP writer ceiling in samples/s: 25-sample calls with a flush per second of data."""
-    from imu_square.mcap_io import RecordingWriter
+    from imu_square.io.mcap import RecordingWriter
 
     rng = np.random.default_rng(2)
     accel = rng.normal(0.0, 0.1, (WRITER_SAMPLES, 3)).astype(np.float32)
@@ -179,7 +179,7 @@ def _board_recording(seconds):
 def bench_stream(args):
     """4 kHz through a pty into `imu-square record` (child process) for --minutes."""
     from acquisition.emulator import EmulatedBoard
-    from imu_square.mcap_io import read_mcap
+    from imu_square.io.mcap import read_mcap
 
     seconds = 60.0 * args.minutes
     program, recording = _board_recording(seconds + 10.0)

@@ -22,8 +22,8 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from imu_square.mcap_io import ACCEL_TOPIC, read_mcap, write_mcap
-from imu_square.recording import Recording, SensorInfo
+from imu_square.io.mcap import ACCEL_TOPIC, read_mcap, write_mcap
+from imu_square.io.recording import Recording, SensorInfo
 
 RESULTS = Path(__file__).parent / "results" / "recording_io.json"
 REPEATS = 5

@@ -9,8 +9,8 @@ non-orthogonality ``beta``; white noise of density ``d`` per axis.
 
 import numpy as np
 
+from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.program import TestProgram
-from imu_square.recording import Event, Recording, SensorInfo
 from imu_square.units import G
 
 

@@ -24,7 +24,7 @@ from acquisition.protocol import Parser, SampleBlock
 from acquisition.reader import open_port
 from imu_square.cli import main
 from imu_square.errors import ImuSquareWarning
-from imu_square.mcap_io import read_mcap
+from imu_square.io.mcap import read_mcap
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 
 

@@ -15,7 +15,7 @@ import pytest
 from acq_board import running_board, write_inputs
 
 from imu_square.cli import main
-from imu_square.mcap_io import (
+from imu_square.io.mcap import (
     ACCEL_TOPIC,
     EVENTS_TOPIC,
     PREVIEW_TOPIC,

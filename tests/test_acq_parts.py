@@ -21,7 +21,7 @@ from acquisition.stream import SampleStream
 from acquisition.trigger import ImmediateTrigger, MarkerTrigger, MotionTrigger, make_trigger
 from imu_square.cli import main
 from imu_square.errors import ConfigError, ImuSquareError
-from imu_square.mcap_io import read_mcap
+from imu_square.io.mcap import read_mcap
 
 # -- faults ----------------------------------------------------------------------------------
 

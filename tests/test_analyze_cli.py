@@ -7,7 +7,7 @@ import pytest
 from pipeline_synth import synth_circle
 
 from imu_square.cli import main
-from imu_square.mcap_io import write_mcap
+from imu_square.io.mcap import write_mcap
 from imu_square.program import TestProgram
 
 PROG = TestProgram(cycles_per_direction=3, dwell_s=1.0)

@@ -5,7 +5,8 @@ import pytest
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from numpy.testing import assert_array_equal
 
-from imu_square.cdr_batch import (
+from imu_square.errors import RecordingError
+from imu_square.io.cdr import (
     ACCEL_BATCH_SCHEMA,
     ACCEL_BATCH_SCHEMA_NAME,
     VECTOR3_STAMPED_SCHEMA,
@@ -15,7 +16,6 @@ from imu_square.cdr_batch import (
     encode_accel_batch,
     encode_vector3_stamped,
 )
-from imu_square.errors import RecordingError
 
 REF_ENCODE = serialize_dynamic(ACCEL_BATCH_SCHEMA_NAME, ACCEL_BATCH_SCHEMA)[ACCEL_BATCH_SCHEMA_NAME]
 REF_DECODE = generate_dynamic(ACCEL_BATCH_SCHEMA_NAME, ACCEL_BATCH_SCHEMA)[ACCEL_BATCH_SCHEMA_NAME]

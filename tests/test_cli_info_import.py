@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from imu_square.cli import main
-from imu_square.mcap_io import RecordingWriter, read_mcap
-from imu_square.recording import Event
+from imu_square.io.mcap import RecordingWriter, read_mcap
+from imu_square.io.recording import Event
 
 REAL = Path("/work/shared/realdata")
 KLIPPER = REAL / "beattune-core__shaketune-cli-docker__raw_data_x_lis2dw_20260423_171429.HEAD50.csv"

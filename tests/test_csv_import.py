@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from imu_square.csv_import import read_csv
 from imu_square.errors import ImuSquareError, RecordingError
+from imu_square.io.csv import read_csv
 from imu_square.program import TestProgram
 from imu_square.units import G
 

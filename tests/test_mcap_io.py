@@ -17,7 +17,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 import imu_square
 from imu_square.errors import ImuSquareWarning, RecordingError
-from imu_square.mcap_io import (
+from imu_square.io.mcap import (
     ACCEL_TOPIC,
     EVENTS_TOPIC,
     PREVIEW_TOPIC,
@@ -29,8 +29,8 @@ from imu_square.mcap_io import (
     summarize,
     write_mcap,
 )
+from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.program import TestProgram
-from imu_square.recording import Event, Recording, SensorInfo
 
 SENSOR = SensorInfo("ADXL355", "SN 42", 2.2e-4, 19.6133, float("nan"))
 

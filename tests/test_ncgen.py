@@ -13,15 +13,15 @@ from hypothesis import strategies as st
 
 from imu_square.cli import main
 from imu_square.errors import ProgramError
-from imu_square.gcode_check import RADIUS_TOLERANCE_MM, parse_nc
-from imu_square.ncgen import (
+from imu_square.program import TestProgram, program_from_mapping
+from imu_square.program.gcode_check import RADIUS_TOLERANCE_MM, parse_nc
+from imu_square.program.ncgen import (
     DEFAULT_APPROACH_MM,
     DIALECTS,
     START_DWELL_S,
     block_arcs_deg,
     generate_nc,
 )
-from imu_square.program import TestProgram, program_from_mapping
 
 # Coordinates are written with 3 decimals (1 um): a rounded point is within
 # 0.5e-3 * sqrt(2) mm of the true one. The centre (start point + rounded I/J)

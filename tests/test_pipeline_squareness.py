@@ -10,10 +10,10 @@ import pytest
 from pipeline_synth import synth_circle
 
 from imu_square.errors import AnalysisError
+from imu_square.io.recording import SensorInfo
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.pipeline.uncertainty import cramer_rao
 from imu_square.program import TestProgram
-from imu_square.recording import SensorInfo
 
 PROG = TestProgram(cycles_per_direction=4, dwell_s=1.0)
 FAST = AnalysisOptions(bootstrap_n=50, grid_points=256)
@@ -180,7 +180,7 @@ def test_simulator_end_to_end_with_servo_and_spikes():
 def test_real_rectangle_is_refused_in_one_line(tmp_path):
     if not REALDATA.exists():
         pytest.skip(f"{REALDATA} is not available")
-    from imu_square.csv_import import read_csv
+    from imu_square.io.csv import read_csv
 
     program = TestProgram(cycles_per_direction=2, overshoot_rad=0.0, dwell_s=2.0)
     rec = read_csv(REALDATA, program, columns=["t_s", "ax_mps2", "ay_mps2", "az_mps2"])

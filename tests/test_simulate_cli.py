@@ -8,7 +8,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 
 from imu_square.cli import main
-from imu_square.mcap_io import read_mcap
+from imu_square.io.mcap import read_mcap
 from imu_square.program import read_program
 from imu_square.simulate import data_path, read_machine, read_sensor, simulate_run, with_effects
 

@@ -77,7 +77,7 @@ def run(args):
     from acquisition.progress import ProgressPrinter, describe
     from acquisition.recorder import Recorder
     from imu_square.commands.analyze import format_summary
-    from imu_square.mcap_io import read_mcap
+    from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.plot import plot_results
     from imu_square.pipeline.squareness import analyze
     from imu_square.program import read_program

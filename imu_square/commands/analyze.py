@@ -54,7 +54,7 @@ def format_summary(path, r):
 
 def run(args):
     """Analyse each recording; return 2 if any could not be analysed."""
-    from imu_square.mcap_io import read_mcap
+    from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.convergence import convergence
     from imu_square.pipeline.squareness import AnalysisOptions, analyze
     from imu_square.program import read_program

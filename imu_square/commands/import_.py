@@ -3,11 +3,11 @@
 import math
 import sys
 
-from imu_square.csv_import import FORMATS, GRAVITY_AXES, read_csv
 from imu_square.errors import ImuSquareError
-from imu_square.mcap_io import write_mcap
+from imu_square.io.csv import FORMATS, GRAVITY_AXES, read_csv
+from imu_square.io.mcap import write_mcap
+from imu_square.io.recording import SensorInfo
 from imu_square.program import read_program
-from imu_square.recording import SensorInfo
 from imu_square.units import G
 
 

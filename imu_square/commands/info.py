@@ -2,7 +2,7 @@
 
 import json
 
-from imu_square.mcap_io import scan_mcap, summarize
+from imu_square.io.mcap import scan_mcap, summarize
 
 
 def register(sub):

@@ -4,8 +4,8 @@ import sys
 from pathlib import Path
 
 from imu_square.errors import ProgramError
-from imu_square.ncgen import DIALECTS, generate_nc
 from imu_square.program import read_program
+from imu_square.program.ncgen import DIALECTS, generate_nc
 
 
 def register(sub):

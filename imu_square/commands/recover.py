@@ -2,7 +2,7 @@
 
 import sys
 
-from imu_square.mcap_io import recover_mcap
+from imu_square.io.mcap import recover_mcap
 
 
 def register(sub):

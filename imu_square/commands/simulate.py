@@ -43,7 +43,7 @@ def register(sub):
 
 def run(args):
     """Simulate, write the recording and the truth, print a one-line summary."""
-    from imu_square.mcap_io import write_mcap
+    from imu_square.io.mcap import write_mcap
 
     program = read_program(args.program or data_path("program_paper.toml"))
     machine = read_machine(args.machine or data_path("machine_ideal.toml"))

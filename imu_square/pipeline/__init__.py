@@ -1,7 +1,7 @@
 """The analysis pipeline: filter -> segment -> flip/average -> fit -> squareness.
 
 One module per step; :func:`analyze` runs them all on a
-:class:`~imu_square.recording.Recording` and returns a frozen
+:class:`~imu_square.io.recording.Recording` and returns a frozen
 :class:`RunResult`.
 """
 

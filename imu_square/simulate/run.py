@@ -12,7 +12,7 @@ import secrets
 import numpy as np
 
 from imu_square.errors import ConfigError
-from imu_square.recording import Event, Recording, SensorInfo
+from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.simulate.kinematics import carriage_motion, carriage_tilt
 from imu_square.simulate.machine import MachineModel
 from imu_square.simulate.noise import digitise, sensor_noise

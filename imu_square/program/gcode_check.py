@@ -1,4 +1,4 @@
-"""A small, strict reader of the NC code that :mod:`imu_square.ncgen` writes.
+"""A small, strict reader of the NC code that :mod:`imu_square.program.ncgen` writes.
 
 It understands only the subset the generator uses (G0/G1/G2/G3 in the XY
 plane with incremental I/J centres, G4 dwells, M-codes, comments, program
@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass, field
 
 from imu_square.errors import ProgramError
-from imu_square.ncgen import DIALECTS
+from imu_square.program.ncgen import DIALECTS
 
 # Largest gap between the start and end radius of an arc, as the controls
 # allow (LinuxCNC: 0.0005 in); our coordinates are rounded to 1 um. [mm]

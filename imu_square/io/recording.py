@@ -2,7 +2,7 @@
 
 The :class:`Recording` is the one data object that acquisition writes, the
 simulator returns and the pipeline reads. Plain array functions do the work;
-file formats live in :mod:`imu_square.mcap_io` and :mod:`imu_square.csv_import`.
+file formats live in :mod:`imu_square.io.mcap` and :mod:`imu_square.io.csv`.
 
 Time base
 ---------

@@ -4,13 +4,13 @@ File layout
 -----------
 ``/imu/accel``
     ``imu_square/msg/AccelBatch`` (ros2msg schema, CDR): about 0.1 s of
-    consecutive samples per message, see :mod:`imu_square.cdr_batch`.
+    consecutive samples per message, see :mod:`imu_square.io.cdr`.
     ``log_time = publish_time = t0_ns`` of the batch.
 ``/imu/preview``
     ``geometry_msgs/msg/Vector3Stamped`` (CDR), the mean of the samples of
     each 1/100 s, frame ``"imu"``, for plotting in Foxglove; never read back.
 ``/test/events``
-    JSON, one :class:`~imu_square.recording.Event` per message.
+    JSON, one :class:`~imu_square.io.recording.Event` per message.
 attachment ``program.toml``
     The test program, when the recording has one.
 metadata ``sensor``, ``machine``, ``software``, ``recording``, ``sequence``
@@ -50,7 +50,8 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 import imu_square
-from imu_square.cdr_batch import (
+from imu_square.errors import ImuSquareError, ImuSquareWarning, RecordingError
+from imu_square.io.cdr import (
     ACCEL_BATCH_SCHEMA,
     ACCEL_BATCH_SCHEMA_NAME,
     VECTOR3_STAMPED_SCHEMA,
@@ -59,9 +60,8 @@ from imu_square.cdr_batch import (
     encode_accel_batch,
     encode_vector3_stamped,
 )
-from imu_square.errors import ImuSquareError, ImuSquareWarning, RecordingError
+from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.program import parse_program
-from imu_square.recording import Event, Recording, SensorInfo
 
 ACCEL_TOPIC = "/imu/accel"
 PREVIEW_TOPIC = "/imu/preview"

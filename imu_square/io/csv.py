@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from imu_square.errors import RecordingError, check_option
-from imu_square.recording import AXES, Event, Recording, SensorInfo
+from imu_square.io.recording import AXES, Event, Recording, SensorInfo
 from imu_square.units import G
 
 FORMATS = {
