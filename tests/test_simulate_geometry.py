@@ -7,8 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from imu_square.simulate import Geometry, chapman_machine
-
-UM = 1e-6
+from imu_square.units import UM
 
 
 def test_equation_1_bow_is_s_at_the_travel_ends():

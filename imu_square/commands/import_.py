@@ -8,7 +8,7 @@ from imu_square.io.csv import FORMATS, GRAVITY_AXES, read_csv
 from imu_square.io.mcap import write_mcap
 from imu_square.io.recording import SensorInfo
 from imu_square.program import read_program
-from imu_square.units import G
+from imu_square.units import UG, G
 
 
 def register(sub):
@@ -68,7 +68,7 @@ def run(args):
     sensor = SensorInfo(
         model=args.sensor_model,
         range_m_s2=nan if args.range_g is None else args.range_g * G,
-        noise_density_m_s2_rthz=nan if args.noise_ug is None else args.noise_ug * 1e-6 * G,
+        noise_density_m_s2_rthz=nan if args.noise_ug is None else args.noise_ug * UG,
     )
     recording = read_csv(
         args.csv,

@@ -3,6 +3,7 @@
 import json
 
 from imu_square.io.mcap import scan_mcap, summarize
+from imu_square.units import UG
 
 
 def register(sub):
@@ -45,7 +46,7 @@ def _text(path, summary):
         f"  sensor     {sensor['model']}"
         + (f" #{sensor['serial']}" if sensor["serial"] else "")
         + (
-            f", noise {sensor['noise_density_m_s2_rthz'] * 1e6 / 9.80665:.3g} ug/rtHz"
+            f", noise {sensor['noise_density_m_s2_rthz'] / UG:.3g} ug/rtHz"
             if sensor["noise_density_m_s2_rthz"] is not None
             else ""
         )

@@ -58,10 +58,7 @@ from imu_square.errors import ConfigError
 from imu_square.simulate.config import Sections, load_toml
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.trajectory import RAMP_PROFILES
-
-UM = 1e-6
-MS = 1e-3
-HOUR = 3600.0
+from imu_square.units import HOUR, MS, UM
 
 
 @dataclass(frozen=True)

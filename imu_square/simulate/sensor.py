@@ -38,9 +38,7 @@ import numpy as np
 
 from imu_square.errors import ConfigError
 from imu_square.simulate.config import Sections, load_toml
-from imu_square.units import G
-
-UG = 1e-6 * G
+from imu_square.units import UG, G
 
 
 @dataclass(frozen=True)
