@@ -573,7 +573,7 @@ class Recorder:
             resolution_m_s2=h.scale_m_s2_per_count,
         )
         metadata = {
-            "source": "imu-square record",
+            "producer": "imu-square record",
             "port": str(self.port),
             "baudrate": str(self.baudrate),
             "wire_mode": h.mode,

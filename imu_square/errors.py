@@ -34,24 +34,38 @@ class ImuSquareWarning(UserWarning):
     """A recoverable oddity: the result is still produced, but say so."""
 
 
-def check_option(name, value, allowed):
-    """Raise if ``value`` is not one of ``allowed``.
+def check_option(name, value, allowed, where="", error=ImuSquareError):
+    """Raise if ``value`` is not one of ``allowed``: the one "must be one of" message.
+
+    Modelled on MNE-Python's ``_check_option(parameter, value, allowed_values,
+    extra="")``: the caller gives the context the message needs, so that no
+    module writes the template by hand.
 
     Parameters
     ----------
     name : str
-        Parameter or field name, used in the message.
+        Parameter or field name, e.g. ``"dialect"`` or ``"[program] plane"``.
     value : object
         Value received.
     allowed : iterable
         Allowed values.
+    where : str
+        Where the value came from, e.g. the file's path; prefixed with ": ".
+    error : type
+        The :class:`ImuSquareError` subclass to raise.
 
     Returns
     -------
     object
         ``value`` unchanged.
+
+    Raises
+    ------
+    ImuSquareError
+        Of class ``error``: ``"{where}: {name} must be one of {allowed!r}, got {value!r}"``.
     """
     allowed = tuple(allowed)
     if value not in allowed:
-        raise ImuSquareError(f"{name} must be one of {allowed!r}, got {value!r}")
+        prefix = f"{where}: " if where else ""
+        raise error(f"{prefix}{name} must be one of {allowed!r}, got {value!r}")
     return value

@@ -23,7 +23,7 @@ ramp_s = 0.15
 ramp_profile = "trapezoid"
 
 [geometry]
-squareness_um_per_m = {SQUARENESS_UM_PER_M}
+machine_squareness_um_per_m = {SQUARENESS_UM_PER_M}
 axis_length_mm = [400.0, 400.0]
 axis_centre_mm = [0.0, 0.0]
 """

@@ -109,7 +109,7 @@ def synth_circle(
         program=prog,
         sensor=sensor or SensorInfo(noise_density_m_s2_rthz=density),
         events=ev,
-        metadata={"source": "synthetic"},
+        metadata={"producer": "tests/pipeline_synth.py"},
     )
     truth = {
         "squareness_rad": alpha + beta,

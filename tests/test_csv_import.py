@@ -51,7 +51,11 @@ def test_imu_square_format_keeps_times_exact(tmp_path):
     assert_array_equal(rec.accel[:, 2], expected_z.astype(np.float32))
     assert rec.accel.dtype == np.float32 and rec.machine_id == "m7"
     assert rec.program == TestProgram() and rec.events == []
-    assert rec.metadata == {"source": "data.csv", "source_format": "imu-square"}
+    assert rec.metadata == {
+        "producer": "imu-square import",
+        "source_file": "data.csv",
+        "source_format": "imu-square",
+    }
 
 
 def test_gaps_become_events_and_sequence_jumps_never_samples(tmp_path):

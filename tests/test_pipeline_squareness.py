@@ -28,7 +28,8 @@ def test_squareness_servo_and_rotation_from_closed_form():
     )
     res = analyze(rec, FAST)
     crb = cramer_rao(1e-7, 0.1, 8 * PROG.period_s)
-    assert abs(res.squareness_rad - (alpha + beta / math.cos(2 * eps))) < 0.2e-6 + 5 * crb
+    # theta_y - theta_x as measured: beta + alpha cos(2 eps) (docs/model.md, measurand).
+    assert abs(res.squareness_rad - (beta + alpha * math.cos(2 * eps))) < 0.2e-6 + 5 * crb
     assert res.servo_mismatch_rad == pytest.approx(truth["servo_mismatch_rad"], rel=1e-3)
     # eps_c within 0.1 deg and within its stated uncertainty (k = 3).
     assert abs(res.eps_c_rad - eps) < min(math.radians(0.1), 3 * res.u_eps_c_rad)
@@ -40,21 +41,22 @@ def test_squareness_servo_and_rotation_from_closed_form():
     assert res.amp_y_m_s2 == pytest.approx(0.1 * math.cos(beta), rel=1e-4)
     # theta_x = -alpha + eps, theta_y = beta + eps (docs/model.md; lags cancel in the mean).
     assert abs(res.theta_x_rad - (-alpha + eps)) < 2e-3
-    # Per direction: alpha + beta / cos(2 eps) + m (the rotation correction).
-    ccw = alpha + beta / math.cos(2 * eps) + truth["servo_mismatch_rad"]
+    # Per direction: beta + (alpha + m) cos(2 eps).
+    ccw = beta + (alpha + truth["servo_mismatch_rad"]) * math.cos(2 * eps)
     assert abs(res.ccw.squareness_rad - ccw) < 0.2e-6 + 5 * crb
 
 
 def test_rotated_sensor_sees_squareness_times_cos_two_eps():
     # Along a direction gamma the phase is gamma - alpha cos^2(gamma): rotated axes
-    # see theta_y - theta_x = alpha cos(2 eps). The result divides it out.
+    # see theta_y - theta_x = alpha cos(2 eps). The result reports it as seen; the
+    # servo mismatch, a machine term, is divided by cos(2 eps).
     alpha, eps = 500e-6, math.radians(5.0)
     rec, _ = synth_circle(PROG, alpha=alpha, eps_c=eps, tau_x=2e-3, density=1e-7, fs=500.0)
     res = analyze(rec, FAST)
     crb = cramer_rao(1e-7, 0.1, 8 * PROG.period_s)
     raw = res.theta_y_rad - res.theta_x_rad
     assert abs(raw - alpha * math.cos(2 * eps)) < 0.1e-6 + 5 * crb
-    assert abs(res.squareness_rad - alpha) < 0.1e-6 + 5 * crb
+    assert abs(res.squareness_rad - alpha * math.cos(2 * eps)) < 0.1e-6 + 5 * crb
     assert res.servo_mismatch_rad == pytest.approx(-2e-3, rel=1e-3)
 
 

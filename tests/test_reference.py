@@ -199,7 +199,7 @@ def test_local_no_yaw_varies_with_location_all_methods_agree(machine, centre):
     # "local squareness results that vary according to the location of the
     # test, but all test methods give the same results"
     dev = chapman_eq(machine)
-    expected = float(chapman_machine(machine).local_squareness(*centre))
+    expected = float(chapman_machine(machine).local_machine_squareness(*centre))
     k = 8 * S / L_AXIS**2
     # closed form: alpha - k (x_c [X bow] + y_c [Y bow])
     assert expected == pytest.approx(
@@ -414,7 +414,7 @@ def test_instrument_rotation_cancels():
 def test_cli_reference_machine_3(tmp_path, capsys):
     path = tmp_path / "m3.toml"
     path.write_text(
-        "[geometry]\nsquareness_um_per_m = 15.0\naxis_length_mm = [800.0, 800.0]\n"
+        "[geometry]\nmachine_squareness_um_per_m = 15.0\naxis_length_mm = [800.0, 800.0]\n"
         "[straightness_yaw]\nx_um = 10.0\nyaw_x = true\n"
     )
     assert main(["reference", "--machine", str(path), "--json"]) == 0
@@ -434,6 +434,6 @@ def test_cli_reference_machine_3(tmp_path, capsys):
 
 def test_cli_reference_bad_radius(tmp_path, capsys):
     path = tmp_path / "m.toml"
-    path.write_text("[geometry]\nsquareness_um_per_m = 15.0\n")
+    path.write_text("[geometry]\nmachine_squareness_um_per_m = 15.0\n")
     assert main(["reference", "--machine", str(path), "--radius-mm", "-5"]) == 2
     assert "--radius-mm must be > 0, got -5.0" in capsys.readouterr().err

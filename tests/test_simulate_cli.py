@@ -53,11 +53,11 @@ def test_simulate_writes_recording_and_truth(tmp_path, capsys):
     ]
     assert main(argv) == 0
     err = capsys.readouterr().err
-    assert "samples" in err and "truth squareness 15.00 urad" in err
+    assert "samples" in err and "truth squareness 15.00 µm/m" in err
     truth = json.loads((tmp_path / "out" / "run.truth.json").read_text())
     # gravity coupling adds ~980 urad to what theta_y - theta_x will show
-    shown = truth["expected_theta_diff_exact_rad"] * 1e6
-    assert f"(expected theta_y - theta_x on this circle {shown:.2f} urad)" in err
+    shown = truth["expected_squareness_rad"] * 1e6
+    assert f"(expected theta_y - theta_x on this circle {shown:.2f} µm/m)" in err
     assert shown > 900
     recording = read_mcap(out)
     # the same run through the library, bit for bit
@@ -90,8 +90,8 @@ def test_simulate_defaults_and_no_events(tmp_path, capsys):
     assert recording.sample_rate_hz == 1000.0
     truth = json.loads(truth_path.read_text())
     assert truth["squareness_rad"] == 0.0 and isinstance(truth["seed"], int)
-    assert truth["expected_theta_diff_exact_rad"] == 0.0
-    assert "truth squareness 0.00 urad; truth in" in capsys.readouterr().err
+    assert truth["expected_squareness_rad"] == 0.0
+    assert "truth squareness 0.00 µm/m; truth in" in capsys.readouterr().err
     assert len(truth["blocks"]) == 2
 
 

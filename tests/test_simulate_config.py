@@ -44,7 +44,7 @@ def test_shipped_files_read():
         "straightness_yaw",
         "structural_vibration",
     }
-    assert_allclose(typical.geometry.squareness_rad, 15e-6, rtol=1e-12)
+    assert_allclose(typical.geometry.machine_squareness_rad, 15e-6, rtol=1e-12)
 
 
 def test_unknown_data_file():
@@ -56,7 +56,7 @@ def test_machine_file_units(tmp_path):
     path = tmp_path / "m.toml"
     path.write_text(
         "[machine]\nname = 'm1'\nramp_s = 0.2\nramp_profile = 's_curve'\n"
-        "[geometry]\nsquareness_um_per_m = -12.5\naxis_centre_mm = [100, -50]\n"
+        "[geometry]\nmachine_squareness_um_per_m = -12.5\naxis_centre_mm = [100, -50]\n"
         "[squareness_drift]\nrate_um_per_m_per_h = 3.6\n"
         "[servo_mismatch]\ntau_x_ms = 1.5\n"
         "[straightness_yaw]\nx_um = 4\nyaw_x = true\n"
@@ -64,8 +64,8 @@ def test_machine_file_units(tmp_path):
     )
     m = read_machine(path)
     assert m.name == "m1" and m.ramp_s == 0.2 and m.ramp_profile == "s_curve"
-    assert_allclose(m.geometry.squareness_rad, -12.5e-6, rtol=1e-12)
-    assert_allclose(m.geometry.squareness_rate_rad_s, 1e-9, rtol=1e-12)
+    assert_allclose(m.geometry.machine_squareness_rad, -12.5e-6, rtol=1e-12)
+    assert_allclose(m.geometry.machine_squareness_rate_rad_s, 1e-9, rtol=1e-12)
     assert_allclose(m.geometry.axis_centre_m, (0.1, -0.05), rtol=1e-12)
     assert_allclose(m.tau_x_s, 1.5e-3, rtol=1e-12)
     assert m.geometry.yaw_x and not m.geometry.yaw_y
@@ -161,7 +161,7 @@ def test_effect_magnitudes_at_the_paper_test():
     paper = TestProgram()
     assert_allclose(paper.omega_rad_s * (machine.tau_y_s - machine.tau_x_s), 1000e-6, rtol=1e-9)
     assert_allclose(machine.tilt_per_m[1] * 0.1, 10e-6, rtol=1e-12)  # 10 urad per 100 mm
-    assert_allclose(machine.geometry.squareness_rate_rad_s * 3600, 36e-6, rtol=1e-12)
+    assert_allclose(machine.geometry.machine_squareness_rate_rad_s * 3600, 36e-6, rtol=1e-12)
     assert sensor == SensorModel()
 
 

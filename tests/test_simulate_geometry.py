@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from imu_square.errors import ConfigError
 from imu_square.simulate import Geometry, chapman_machine
 from imu_square.units import UM
 
@@ -57,14 +58,16 @@ def test_local_squareness_is_uniform_for_machines_without_bare_straightness(n):
     """Chapman: machines 1, 3 and 5 give 15 um/m at every test location."""
     g = chapman_machine(n)
     x, y = np.meshgrid(np.linspace(-0.3, 0.3, 7), np.linspace(-0.3, 0.3, 7))
-    assert_allclose(g.local_squareness(x, y), 15e-6, rtol=1e-12)
+    assert_allclose(g.local_machine_squareness(x, y), 15e-6, rtol=1e-12)
 
 
 def test_machine_2_local_squareness_varies_along_x():
     g = chapman_machine(2)
     # the X axis tilts by 8 S x / L^2 while Y stays put: 15 - 125 um/m/m * x
     assert_allclose(
-        g.local_squareness(np.array([-0.4, 0.0, 0.4]), 0.0), [65e-6, 15e-6, -35e-6], rtol=1e-12
+        g.local_machine_squareness(np.array([-0.4, 0.0, 0.4]), 0.0),
+        [65e-6, 15e-6, -35e-6],
+        rtol=1e-12,
     )
 
 
@@ -91,16 +94,21 @@ def ballbar_squareness(g, centre, radius, t=0.0):
 @pytest.mark.parametrize("centre", [(0.0, 0.0), (0.25, -0.15), (-0.2, 0.3)])
 def test_ballbar_fit_of_actual_path_equals_local_squareness(n, centre):
     g = chapman_machine(n)
-    expected = g.local_squareness(*centre)
+    expected = g.local_machine_squareness(*centre)
     assert_allclose(ballbar_squareness(g, centre, 0.15), expected, rtol=1e-9, atol=1e-15)
 
 
 def test_squareness_drift_and_scale():
-    g = Geometry(squareness_rad=10e-6, squareness_rate_rad_s=1e-8, scale_x=20e-6, scale_y=-5e-6)
+    g = Geometry(
+        machine_squareness_rad=10e-6,
+        machine_squareness_rate_rad_s=1e-8,
+        scale_x=20e-6,
+        scale_y=-5e-6,
+    )
     dx, dy = g.deviation(0.1, 0.2, t=100.0)
     assert_allclose(dx, 20e-6 * 0.1 - 0.2 * (10e-6 + 1e-6), rtol=1e-12)
     assert_allclose(dy, -5e-6 * 0.2, rtol=1e-12)
-    assert_allclose(g.local_squareness(0.0, 0.0, t=100.0), 11e-6, rtol=1e-12)
+    assert_allclose(g.local_machine_squareness(0.0, 0.0, t=100.0), 11e-6, rtol=1e-12)
 
 
 def test_axis_centre_moves_chapman_origin():
@@ -122,5 +130,7 @@ def test_apply_position_matches_deviation():
 
 
 def test_chapman_machine_number_is_checked():
-    with pytest.raises(ValueError, match=r"must be one of \(1, 2, 3, 4, 5\), got 6"):
+    with pytest.raises(
+        ConfigError, match=r"chapman_machine n must be one of \(1, 2, 3, 4, 5\), got 6"
+    ):
         chapman_machine(6)

@@ -30,8 +30,8 @@ D2 = np.array([-1 / 560, 8 / 315, -1 / 5, 8 / 5, -205 / 72, 8 / 5, -1 / 5, 8 / 3
 
 ALL_DRIVE = MachineModel(
     geometry=Geometry(
-        squareness_rad=15e-6,
-        squareness_rate_rad_s=1e-6,
+        machine_squareness_rad=15e-6,
+        machine_squareness_rate_rad_s=1e-6,
         scale_x=20e-6,
         scale_y=-10e-6,
         straightness_x_m=10e-6,
@@ -175,4 +175,4 @@ def test_chapman_yaw_rotates_the_sensor_with_the_carriage():
     )
     _, truth = simulate_run(program, MachineModel(geometry=g), seed=0, lead_in_s=0.5)
     assert_allclose(truth["carriage_yaw_rad"], 25e-6, rtol=1e-12)
-    assert_allclose(truth["local_squareness_rad"], 15e-6, rtol=1e-12)
+    assert_allclose(truth["local_machine_squareness_rad"], 15e-6, rtol=1e-12)

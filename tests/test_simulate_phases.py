@@ -67,14 +67,14 @@ def run(machine=None, sensor=SENSOR, program=PROGRAM):
 @pytest.mark.parametrize(
     ("machine", "sensor", "square", "m"),
     [
-        (MachineModel(geometry=Geometry(squareness_rad=500e-6)), SENSOR, 500e-6, 0.0),
-        (MachineModel(geometry=Geometry(squareness_rad=-80e-6)), SENSOR, -80e-6, 0.0),
+        (MachineModel(geometry=Geometry(machine_squareness_rad=500e-6)), SENSOR, 500e-6, 0.0),
+        (MachineModel(geometry=Geometry(machine_squareness_rad=-80e-6)), SENSOR, -80e-6, 0.0),
         (None, SensorModel(sample_rate_hz=200.0, beta_rad=300e-6), 300e-6, 0.0),
         (MachineModel(tau_x_s=1e-3, tau_y_s=3e-3), SENSOR, 0.0, 2e-3),
         (MachineModel(tau_x_s=4e-3, tau_y_s=1e-3), SENSOR, 0.0, -3e-3),
         (
             MachineModel(
-                geometry=Geometry(squareness_rad=15e-6),
+                geometry=Geometry(machine_squareness_rad=15e-6),
                 tau_x_s=2e-3,
                 tau_y_s=2.5e-3,
                 ramp_profile="s_curve",
@@ -118,7 +118,7 @@ def test_rotation_scales_machine_squareness_by_cos_2eps():
     """
     alpha, beta, eps = 1000e-6, 200e-6, math.radians(2.1)
     recording, _truth = run(
-        MachineModel(geometry=Geometry(squareness_rad=alpha)),
+        MachineModel(geometry=Geometry(machine_squareness_rad=alpha)),
         SensorModel(sample_rate_hz=200.0, eps_c_rad=eps, beta_rad=beta),
     )
     dev = phase_deviation(recording, _truth)
@@ -135,11 +135,11 @@ def test_off_centre_straightness_measures_local_squareness():
         radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=3, dwell_s=0.5, centre_m=(0.2, 0.1)
     )
     recording, truth = run(MachineModel(geometry=geometry), program=program)
-    assert_allclose(truth["local_squareness_rad"], -10e-6, atol=1e-12)
+    assert_allclose(truth["local_machine_squareness_rad"], -10e-6, atol=1e-12)
     assert_allclose(truth["squareness_rad"], 15e-6, atol=1e-15)
     dev = phase_deviation(recording, truth)
-    assert_allclose(dev["ccw"], -truth["local_squareness_rad"], atol=TOL)
-    assert_allclose(dev["cw"], truth["local_squareness_rad"], atol=TOL)
+    assert_allclose(dev["ccw"], -truth["local_machine_squareness_rad"], atol=TOL)
+    assert_allclose(dev["cw"], truth["local_machine_squareness_rad"], atol=TOL)
 
 
 def test_gravity_coupling_phase_matches_truth():
@@ -186,12 +186,14 @@ def test_centripetal_amplitude_is_v2_over_r():
 
 
 def test_drifting_squareness_and_beta_are_measured_at_their_window_means():
-    machine = MachineModel(geometry=Geometry(squareness_rad=20e-6, squareness_rate_rad_s=1e-6))
+    machine = MachineModel(
+        geometry=Geometry(machine_squareness_rad=20e-6, machine_squareness_rate_rad_s=1e-6)
+    )
     sensor = SensorModel(sample_rate_hz=200.0, beta_rad=10e-6, beta_0_rad=60e-6, tau_warm_s=20.0)
     recording, truth = run(machine, sensor)
     windows = [(b["analysed_start_s"], b["analysed_end_s"]) for b in truth["blocks"]]
     t_mid = np.mean([0.5 * (a + b) for a, b in windows])
-    assert_allclose(truth["alpha_rad"], 20e-6 + 1e-6 * t_mid, rtol=1e-12)
+    assert_allclose(truth["machine_squareness_rad"], 20e-6 + 1e-6 * t_mid, rtol=1e-12)
     dev = phase_deviation(recording, truth)
     # CCW sees the means over its window, CW over its; equal windows: their mean is the truth
     assert_allclose(0.5 * (dev["cw"] - dev["ccw"]), truth["squareness_rad"], atol=TOL)
@@ -221,9 +223,9 @@ def measured_theta_diff(recording, truth):
     ],
     ids=["chapman-2-off-centre", "gravity-preset", "chapman-5-beta-gravity"],
 )
-def test_expected_theta_diff_is_what_the_circle_measures(machine, sensor, centre_m, expected):
+def test_expected_squareness_is_what_the_circle_measures(machine, sensor, centre_m, expected):
     """``squareness_rad`` is the global alpha + beta; the circle measures
-    local_squareness + beta + gravity_phase (first order), here to 0.1 urad."""
+    local_machine_squareness + beta + gravity_phase (first order), here to 0.1 urad."""
     program = TestProgram(
         radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=3, dwell_s=0.5, centre_m=centre_m
     )
@@ -231,14 +233,17 @@ def test_expected_theta_diff_is_what_the_circle_measures(machine, sensor, centre
     measured = measured_theta_diff(recording, truth)
     if expected is not None:
         assert_allclose(measured, expected, atol=0.01e-6)
-    first = truth["local_squareness_rad"] + truth["beta_rad"] + truth["gravity_phase_rad"]
-    assert truth["expected_theta_diff_rad"] == first
-    assert_allclose(truth["expected_theta_diff_rad"], measured, atol=TOL)
-    assert_allclose(truth["expected_theta_diff_exact_rad"], measured, atol=TOL)
+    first = (
+        truth["local_machine_squareness_rad"]
+        + truth["sensor_squareness_rad"]
+        + truth["gravity_phase_rad"]
+    )
+    assert_allclose(first, measured, atol=TOL)
+    assert_allclose(truth["expected_squareness_rad"], measured, atol=TOL)
     assert abs(truth["squareness_rad"] - measured) > 10e-6  # the distinction matters here
 
 
-def test_expected_theta_diff_exact_includes_the_rotation():
+def test_expected_squareness_includes_the_rotation():
     """eps_c = 30 deg with machine 5 off centre and beta: the exact expectation
     (alpha -> alpha cos 2 eps, etc.) matches the fit, the first-order one does not."""
     program = TestProgram(
@@ -247,8 +252,13 @@ def test_expected_theta_diff_exact_includes_the_rotation():
     sensor = SensorModel(sample_rate_hz=200.0, eps_c_rad=math.radians(30.0), beta_rad=40e-6)
     recording, truth = run(MachineModel(geometry=chapman_machine(5)), sensor, program)
     measured = measured_theta_diff(recording, truth)
-    assert_allclose(truth["expected_theta_diff_exact_rad"], measured, atol=TOL)
-    assert abs(truth["expected_theta_diff_rad"] - measured) > 10e-6
+    assert_allclose(truth["expected_squareness_rad"], measured, atol=TOL)
+    first = (
+        truth["local_machine_squareness_rad"]
+        + truth["sensor_squareness_rad"]
+        + truth["gravity_phase_rad"]
+    )
+    assert abs(first - measured) > 10e-6
 
 
 def test_mean_theta_is_eps_c_plus_carriage_yaw_minus_rotation_part_of_j():
@@ -274,6 +284,6 @@ def test_mean_theta_is_eps_c_plus_carriage_yaw_minus_rotation_part_of_j():
         thetas += [math.atan2(-qx, -px), math.atan2(py, -qy)]
     _, jxy, jyx, _ = (float(v) for v in geometry.jacobian(*centre))
     expected = truth["eps_c_rad"] + truth["carriage_yaw_rad"] - (jyx - jxy) / 2
-    expected += truth["beta_rad"] / 2
+    expected += truth["sensor_squareness_rad"] / 2
     assert truth["carriage_yaw_rad"] != 0.0
     assert_allclose(np.mean(thetas), expected, atol=TOL)

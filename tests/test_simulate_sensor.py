@@ -118,7 +118,7 @@ def test_thermal_drift_truth_is_the_mean_over_analysed_cycles():
     windows = [(b["analysed_start_s"], b["analysed_end_s"]) for b in truth["blocks"]]
     t = np.concatenate([np.linspace(a, b, 20001) for a, b in windows])
     expected = np.mean(50e-6 + 200e-6 * np.exp(-t / 300.0))
-    assert_allclose(truth["beta_rad"], expected, rtol=1e-6)
+    assert_allclose(truth["sensor_squareness_rad"], expected, rtol=1e-6)
     assert truth["effects"]["sensor_thermal_drift"]["tau_warm_s"] == 300.0
 
 

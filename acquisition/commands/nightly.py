@@ -76,12 +76,13 @@ def run(args):
     """Record, analyse, write the result and the plot; compare with the truth when emulated."""
     from acquisition.progress import ProgressPrinter, describe
     from acquisition.recorder import Recorder
-    from imu_square.commands.analyze import format_summary
+    from imu_square.errors import AnalysisError
     from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.plot import plot_results
     from imu_square.pipeline.squareness import analyze
     from imu_square.program import read_program
     from imu_square.simulate import data_path
+    from imu_square.units import SQUARENESS_UNIT, URAD
 
     program = read_program(args.program or data_path("program_paper.toml"))
     out = Path(args.out)
@@ -123,27 +124,32 @@ def run(args):
             thread.join(timeout=15.0)
     print(f"{mcap_path}: {describe(status)}", file=sys.stderr)
 
-    result = analyze(read_mcap(mcap_path))
+    try:
+        result = analyze(read_mcap(mcap_path))
+    except AnalysisError as exc:  # the pipeline names no file: say which
+        raise AnalysisError(f"{mcap_path}: {exc}") from None
     doc = result.to_json_dict()
     doc["recording"] = str(mcap_path)
     doc["recording_complete"] = status.complete
     if truth is not None:
         stem.with_suffix(".truth.json").write_text(json.dumps(truth, indent=1) + "\n")
         # What theta_y - theta_x should read on this circle: local squareness,
-        # sensor non-orthogonality and any gravity-coupling phase.
-        expected = truth["expected_theta_diff_rad"]
+        # sensor non-orthogonality and any gravity-coupling phase, seen through
+        # the sensor's rotation (simulate prints the same key).
+        expected = truth["expected_squareness_rad"]
         error = result.squareness_rad - expected
-        doc["truth_expected_urad"] = expected * 1e6
-        doc["error_urad"] = error * 1e6
+        doc["expected_squareness_urad"] = expected / URAD
+        doc["truth_expected_urad"] = expected / URAD  # old name, kept for one release
+        doc["error_urad"] = error / URAD
     stem.with_suffix(".result.json").write_text(json.dumps(doc, indent=1) + "\n")
-    plot_results([result], stem.with_suffix(".png"))
+    plot_results([result], stem.with_suffix(".png"), title=str(mcap_path))
 
-    print(format_summary(mcap_path, result), file=sys.stderr)
+    print(f"{mcap_path}: {result.summary()}", file=sys.stderr)
     if truth is not None:
         u = result.u_squareness_rad
         print(
-            f"  truth (simulator): {expected * 1e6:.1f} µm/m; error "
-            f"{error * 1e6:+.1f} µm/m = {error / u:+.1f} u"
+            f"  truth (simulator): {expected / URAD:.1f} {SQUARENESS_UNIT}; error "
+            f"{error / URAD:+.1f} {SQUARENESS_UNIT} = {error / u:+.1f} u"
             + ("" if math.isfinite(u) and abs(error) <= 3 * u else "  <-- outside 3u"),
             file=sys.stderr,
         )

@@ -1,9 +1,11 @@
 """``imu-square import``: convert a CSV recording into an MCAP recording."""
 
+import argparse
 import math
 import sys
+import warnings
 
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, ImuSquareWarning
 from imu_square.io.csv import FORMATS, GRAVITY_AXES, read_csv
 from imu_square.io.mcap import write_mcap
 from imu_square.io.recording import SensorInfo
@@ -45,12 +47,15 @@ def register(sub):
         help="the sensor's full-scale range in g: samples at it are clipped and the analysis "
         "drops their cycles (default: unknown, so clipping cannot be detected)",
     )
-    p.add_argument(
-        "--noise-ug",
+    noise = p.add_mutually_exclusive_group()
+    noise.add_argument(
+        "--noise-density-ug",
         type=float,
         help="the sensor's white-noise density in ug/sqrt(Hz), for the noise floor "
         "(default: estimated from the data)",
     )
+    # The option's name until 0.1, accepted with a warning for one release.
+    noise.add_argument("--noise-ug", type=float, help=argparse.SUPPRESS)
     p.add_argument("--sensor-model", default="unknown", help="sensor model, e.g. ADXL355")
     p.add_argument("--machine-id", default="", help="machine the test ran on")
     p.set_defaults(func=run)
@@ -60,7 +65,14 @@ def run(args):
     """Import the CSV and write the MCAP file."""
     program = read_program(args.program)
     columns = None if args.columns is None else [c.strip() for c in args.columns.split(",")]
-    for name in ("range_g", "noise_ug"):
+    if args.noise_ug is not None:
+        warnings.warn(
+            "--noise-ug is now --noise-density-ug; the old name is accepted until the next release",
+            ImuSquareWarning,
+            stacklevel=2,
+        )
+        args.noise_density_ug = args.noise_ug
+    for name in ("range_g", "noise_density_ug"):
         value = getattr(args, name)
         if value is not None and not (math.isfinite(value) and value > 0):
             raise ImuSquareError(f"--{name.replace('_', '-')} must be a number > 0, got {value!r}")
@@ -68,7 +80,9 @@ def run(args):
     sensor = SensorInfo(
         model=args.sensor_model,
         range_m_s2=nan if args.range_g is None else args.range_g * G,
-        noise_density_m_s2_rthz=nan if args.noise_ug is None else args.noise_ug * UG,
+        noise_density_m_s2_rthz=nan
+        if args.noise_density_ug is None
+        else args.noise_density_ug * UG,
     )
     recording = read_csv(
         args.csv,

@@ -13,6 +13,7 @@ from imu_square.simulate import (
     simulate_run,
     with_effects,
 )
+from imu_square.units import SQUARENESS_UNIT, URAD
 
 
 def register(sub):
@@ -58,8 +59,8 @@ def run(args):
     truth_path.parent.mkdir(parents=True, exist_ok=True)
     write_mcap(recording, out)
     truth_path.write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
-    square = f"{round(truth['squareness_rad'] * 1e6, 2) + 0.0:.2f} urad"
-    expected = f"{round(truth['expected_theta_diff_exact_rad'] * 1e6, 2) + 0.0:.2f} urad"
+    square = f"{round(truth['squareness_rad'] / URAD, 2) + 0.0:.2f} {SQUARENESS_UNIT}"
+    expected = f"{round(truth['expected_squareness_rad'] / URAD, 2) + 0.0:.2f} {SQUARENESS_UNIT}"
     if expected != square:
         square += f" (expected theta_y - theta_x on this circle {expected})"
     print(

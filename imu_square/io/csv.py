@@ -282,7 +282,7 @@ def read_csv(
         machine_id=machine_id,
         events=events,
         temperature_c=temperature,
-        metadata={"source": name, "source_format": fmt},
+        metadata={"producer": "imu-square import", "source_file": name, "source_format": fmt},
         processing=[
             f"read_csv: {name}, format {fmt!r}, {unit} -> m/s^2, gravity on {axis}, "
             f"dt_ns={dt_ns} from the median step, {len(events)} gaps"

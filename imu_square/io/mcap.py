@@ -50,7 +50,7 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 import imu_square
-from imu_square.errors import ImuSquareError, ImuSquareWarning, RecordingError
+from imu_square.errors import ImuSquareWarning, RecordingError
 from imu_square.io.cdr import (
     ACCEL_BATCH_SCHEMA,
     ACCEL_BATCH_SCHEMA_NAME,
@@ -836,8 +836,6 @@ def scan_mcap(path):
         if problem:
             raise RecordingError(f"{exc} (reading stopped at byte {cut_at}: {problem})") from None
         raise
-    except ImuSquareError as exc:
-        raise RecordingError(f"{path}: {exc}") from None
     report = RecoveryReport(
         samples=recording.n_samples,
         events=len(recording.events),

@@ -73,6 +73,25 @@ class CycleTraces:
     dropped: tuple
 
 
+def bad_intervals(gap_spans_s, clipped_t_s):
+    """Stretches of untrustworthy data as ``(start, end)`` rows.
+
+    Parameters
+    ----------
+    gap_spans_s : sequence of tuple (float, float)
+        Last sample before and first after each gap. [s]
+    clipped_t_s : ndarray
+        Times of clipped samples, each a zero-length stretch. [s]
+
+    Returns
+    -------
+    ndarray, shape (n_bad, 2)
+        For :func:`cycle_traces`. [s]
+    """
+    rows = [*gap_spans_s, *((t, t) for t in np.asarray(clipped_t_s, dtype=float))]
+    return np.array(rows, dtype=np.float64).reshape(-1, 2)
+
+
 def cycle_traces(t_s, accel_xy, seg, bad_intervals_s=(), margin_s=0.0, grid_points=512):
     """Flip, cut and resample every analysed cycle on a common phi grid.
 

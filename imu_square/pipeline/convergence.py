@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imu_square.units import URAD
+
 
 @dataclass(frozen=True)
 class Convergence:
@@ -32,8 +34,8 @@ class Convergence:
         """Lists in µrad, NaN as None."""
         return {
             "n_runs": self.n_runs.tolist(),
-            "mean_urad": (self.mean_rad * 1e6).tolist(),
-            "u_mean_urad": [None if np.isnan(u) else u * 1e6 for u in self.u_mean_rad],
+            "mean_urad": (self.mean_rad / URAD).tolist(),
+            "u_mean_urad": [None if np.isnan(u) else u / URAD for u in self.u_mean_rad],
         }
 
 

@@ -24,6 +24,7 @@ References
 """
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
@@ -161,3 +162,65 @@ def noise_bandwidth_hz(cutoff_hz, order, sample_rate_hz, highpass=False):
     if highpass:
         g = 1 - g
     return float(np.trapezoid(g**2, f))
+
+
+@dataclass(frozen=True)
+class FilteredRecording:
+    """A recording's samples as the later steps need them.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n_samples,)
+        Sample times from the first sample. [s]
+    raw : ndarray, shape (n_samples, 3)
+        Unfiltered acceleration, float64. [m/s^2]
+    xy : ndarray, shape (n_samples, 2)
+        Zero-phase low-passed x and y. [m/s^2]
+    breaks : tuple of int
+        Indices of the first sample after each gap.
+    sample_rate_hz : float
+        Nominal sample rate. [Hz]
+    margin_s : float
+        Settling time of the filter, kept clear of gaps and block edges. [s]
+    """
+
+    t_s: np.ndarray
+    raw: np.ndarray
+    xy: np.ndarray
+    breaks: tuple
+    sample_rate_hz: float
+    margin_s: float
+
+    @property
+    def gap_spans_s(self):
+        """``(last sample before, first sample after)`` of each gap. [s]"""
+        return [(float(self.t_s[i - 1]), float(self.t_s[i])) for i in self.breaks]
+
+
+def filter_recording(recording, cutoff_hz, order):
+    """Low-pass a recording's horizontal axes, stretch by stretch between gaps.
+
+    Parameters
+    ----------
+    recording : Recording
+        The test as recorded.
+    cutoff_hz : float
+        Cutoff of the designed filter. [Hz]
+    order : int
+        Order of the designed filter.
+
+    Returns
+    -------
+    FilteredRecording
+    """
+    fs = recording.sample_rate_hz
+    raw = recording.accel.astype(np.float64)
+    breaks = tuple(i for i, _ in recording.gaps())
+    return FilteredRecording(
+        t_s=recording.time_s,
+        raw=raw,
+        xy=lowpass(raw[:, :2], cutoff_hz, order, fs, breaks),
+        breaks=breaks,
+        sample_rate_hz=fs,
+        margin_s=settling_time_s(cutoff_hz, order),
+    )

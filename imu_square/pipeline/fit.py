@@ -26,7 +26,7 @@ component at ``omega`` and the stage-2 amplitudes are zero up to noise
 whatever ``eps_c`` is (a rotation of a perfect circle is indistinguishable
 from a time shift). The pipeline therefore estimates ``eps_c`` from the mean
 phase ``(theta_x + theta_y) / 2`` with ``phi`` anchored at the middle of each
-block's motion (:mod:`imu_square.pipeline.squareness`, ``docs/model.md``).
+block's motion (:mod:`imu_square.pipeline.rotation`, ``docs/model.md``).
 
 References
 ----------
@@ -453,3 +453,75 @@ def fit_cross_terms(phi, stage1, norm=None, **irls_options):
         c_x[i] = fit_irls(ey, stage1.y.resid[i], norm, **irls_options).params[0, 1]
     eps = 0.5 * (np.arctan(c_x / stage1.amp_y) + np.arctan(c_y / stage1.amp_x))
     return CrossTermFit(c_x=c_x, c_y=c_y, eps_c=eps)
+
+
+@dataclass(frozen=True)
+class MeanFit:
+    """Stage-1 fit of each direction's averaged cycles: row 0 CCW, row 1 flipped CW.
+
+    Attributes
+    ----------
+    fit : CircleFit
+        The fits of the two averaged traces.
+    mean_x, mean_y : ndarray, shape (2, n_grid)
+        The averaged traces on the phi grid. [m/s^2]
+    amp_x_m_s2, amp_y_m_s2 : ndarray, shape (2,)
+        Amplitudes corrected for the low-pass's gain at the circle frequency. [m/s^2]
+    """
+
+    fit: CircleFit
+    mean_x: np.ndarray
+    mean_y: np.ndarray
+    amp_x_m_s2: np.ndarray
+    amp_y_m_s2: np.ndarray
+
+    @property
+    def amplitude_m_s2(self):
+        """Mean amplitude over both axes and directions. [m/s^2]"""
+        return float(np.mean([self.amp_x_m_s2, self.amp_y_m_s2]))
+
+    @property
+    def squareness_rad(self):
+        """``theta_y - theta_x`` of each direction, wrapped into [-pi, pi). [rad]"""
+        return wrap_angle(self.fit.squareness)
+
+
+def wrap_angle(angle_rad):
+    """Angles wrapped into [-pi, pi).
+
+    Parameters
+    ----------
+    angle_rad : float or ndarray
+        Angles. [rad]
+
+    Returns
+    -------
+    ndarray
+        The same angles modulo 2 pi. [rad]
+    """
+    return (np.asarray(angle_rad) + np.pi) % (2 * np.pi) - np.pi
+
+
+def fit_mean_traces(cycles, gain, norm=None, **irls_options):
+    """Average each direction's cycles and fit the two mean traces.
+
+    Parameters
+    ----------
+    cycles : CycleTraces
+        The flipped, resampled cycles of both directions.
+    gain : float
+        Amplitude gain of the low-pass at the circle frequency, divided out of
+        the fitted amplitudes (the phases are untouched: the filter has zero phase).
+    norm : statsmodels.robust.norms.RobustNorm, optional
+        Tukey biweight if None.
+    **irls_options
+        Passed to :func:`fit_irls`.
+
+    Returns
+    -------
+    MeanFit
+    """
+    mean_x = np.stack([cycles.ccw.x.mean(axis=0), cycles.cw.x.mean(axis=0)])
+    mean_y = np.stack([cycles.ccw.y.mean(axis=0), cycles.cw.y.mean(axis=0)])
+    fit = fit_circle(cycles.phi_grid, mean_x, mean_y, norm, **irls_options)
+    return MeanFit(fit, mean_x, mean_y, fit.amp_x / gain, fit.amp_y / gain)

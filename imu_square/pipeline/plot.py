@@ -9,11 +9,12 @@ References
 import numpy as np
 
 from imu_square.pipeline.fit import sine_design
+from imu_square.units import MM, URAD
 
 _COLOURS = {"ccw": "tab:blue", "cw": "tab:orange", "mean": "black"}
 
 
-def plot_results(results, path, convergence=None):
+def plot_results(results, path, convergence=None, title=""):
     """Write a PNG summarising the last result, and the convergence over runs.
 
     Parameters
@@ -25,6 +26,8 @@ def plot_results(results, path, convergence=None):
     convergence : Convergence, optional
         Running mean and uncertainty over the runs; drawn when it has more
         than one run.
+    title : str
+        What the figure shows, e.g. the recording's name; "run" if empty.
     """
     import matplotlib
 
@@ -48,10 +51,10 @@ def plot_results(results, path, convergence=None):
             label = "CCW" if d == "ccw" else "CW flipped"
             top.plot(deg, data, color=_COLOURS[d], lw=2.5, alpha=0.45, label=f"{label} mean")
             top.plot(deg, fit, color=_COLOURS[d], lw=1, ls="--", label=f"{label} fit")
-            bottom.plot(deg, (data - fit) * 1e3, color=_COLOURS[d], lw=0.8, label=label)
+            bottom.plot(deg, (data - fit) / MM, color=_COLOURS[d], lw=0.8, label=label)
         theta = res.theta_x_rad if axis == "x" else res.theta_y_rad
         top.set_title(
-            f"a_{axis}: flipped, averaged, fitted (theta_{axis} = {theta * 1e6:.1f} µrad)"
+            f"a_{axis}: flipped, averaged, fitted (theta_{axis} = {theta / URAD:.1f} µrad)"
         )
         top.set_ylabel(f"a_{axis} [m/s²]")
         bottom.set_ylabel("residual [mm/s²]")
@@ -65,14 +68,14 @@ def plot_results(results, path, convergence=None):
     pc = res.per_cycle
     k = np.arange(1, pc["pair"].size + 1)
     ax = axes[2, 0]
-    ax.plot(k, pc["ccw_squareness_rad"] * 1e6, "o", color=_COLOURS["ccw"], ms=4, label="CCW")
-    ax.plot(k, pc["cw_squareness_rad"] * 1e6, "s", color=_COLOURS["cw"], ms=4, label="CW flipped")
-    ax.plot(k, pc["squareness_rad"] * 1e6, "D", color="black", ms=4, label="pair mean")
-    s, u = res.squareness_rad * 1e6, res.u_squareness_rad * 1e6
+    ax.plot(k, pc["squareness_ccw_rad"] / URAD, "o", color=_COLOURS["ccw"], ms=4, label="CCW")
+    ax.plot(k, pc["squareness_cw_rad"] / URAD, "s", color=_COLOURS["cw"], ms=4, label="CW flipped")
+    ax.plot(k, pc["squareness_rad"] / URAD, "D", color="black", ms=4, label="pair mean")
+    s, u = res.squareness_rad / URAD, res.u_squareness_rad / URAD
     ax.axhline(s, color="black", lw=1)
     ax.axhspan(s - u, s + u, color="grey", alpha=0.25, label=f"{s:.1f} ± {u:.1f} µm/m (k=1)")
     ax.set_xlabel("cycle pair")
-    ax.set_ylabel("(theta_y - theta_x) / cos 2eps_c [µrad]")
+    ax.set_ylabel("theta_y - theta_x [µm/m]")
     ax.set_title("per-cycle squareness (CCW and CW differ by twice the servo mismatch)")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
@@ -90,21 +93,21 @@ def plot_results(results, path, convergence=None):
         n = convergence.n_runs
         ax = axes[3, 0]
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.plot(n, convergence.mean_rad * 1e6, "o-", ms=3)
+        ax.plot(n, convergence.mean_rad / URAD, "o-", ms=3)
         ax.set_xlabel("number of runs")
         ax.set_ylabel("mean squareness [µm/m]")
         ax.set_title("convergence of the mean")
         ax.grid(alpha=0.3)
         ax = axes[3, 1]
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.plot(n, convergence.u_mean_rad * 1e6, "o-", ms=3)
+        ax.plot(n, convergence.u_mean_rad / URAD, "o-", ms=3)
         ax.set_xlabel("number of runs")
         ax.set_ylabel("type A u of the mean [µm/m]")
         ax.set_title("type A standard uncertainty")
         ax.grid(alpha=0.3)
     fig.suptitle(
-        f"{res.source or 'run'}: squareness {s:.1f} ± {u:.1f} µm/m, "
-        f"servo mismatch {res.servo_mismatch_rad * 1e6:.0f} µrad, "
+        f"{title or 'run'}: squareness {s:.1f} ± {u:.1f} µm/m, "
+        f"servo mismatch {res.servo_mismatch_rad / URAD:.0f} µm/m, "
         f"cycles {res.cycles_used['ccw']} CCW + {res.cycles_used['cw']} CW"
     )
     fig.savefig(path, dpi=110)

@@ -8,6 +8,7 @@ becomes a quality flag on the result, which the CLI prints.
 import numpy as np
 
 from imu_square.errors import AnalysisError
+from imu_square.units import SQUARENESS_UNIT, URAD
 
 # The measured amplitude must lie within this factor of v^2/r, else refuse.
 AMPLITUDE_LIMIT = 1.5
@@ -15,6 +16,14 @@ AMPLITUDE_LIMIT = 1.5
 AMPLITUDE_FLAG = 0.05
 # Refuse when the period departs from the program's by more than this fraction.
 PERIOD_LIMIT = 0.05
+# Flag when the circle period departs from the program's by more than this.
+PERIOD_FLAG = 0.005
+# Flag when the type A uncertainty exceeds the white-noise bound by this factor.
+EXCESS_NOISE_FLAG = 3.0
+# Below half the Cramer-Rao bound the cycle scatter has come out low by chance.
+SCANT_SCATTER_FLAG = 0.5
+# Flag when more than this fraction of the averaged trace gets zero robust weight.
+OUTLIER_FLAG = 0.05
 
 
 def format_accel(value):
@@ -125,3 +134,100 @@ def check_cycles(n_ccw, n_cw, program, min_cycles, dropped):
             f"too few usable cycles: {n_ccw} CCW and {n_cw} CW of "
             f"{program.cycles_per_direction * program.runs} each, min_cycles={min_cycles}{why}"
         )
+
+
+def outlier_fractions(mean_fit):
+    """Fraction of each direction's averaged trace that the robust fit rejected.
+
+    Parameters
+    ----------
+    mean_fit : MeanFit
+        Fits of the CCW and the flipped CW mean traces.
+
+    Returns
+    -------
+    list of float
+        ``[ccw, cw]``: samples of both axes with zero weight, over all.
+    """
+    fit = mean_fit.fit
+    return [
+        float(np.mean(np.concatenate([fit.x.weights[i], fit.y.weights[i]]) == 0.0))
+        for i in range(2)
+    ]
+
+
+def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor):
+    """Quality flags of a result that stands, each oddity with a line a machinist can act on.
+
+    Parameters
+    ----------
+    recording : Recording
+        The recording analysed.
+    seg : Segmentation
+        The blocks found.
+    cyc : CycleTraces
+        The cycles kept and dropped.
+    clipped : ndarray
+        Times of clipped samples. [s]
+    amplitude_ratio : float
+        Measured amplitude over ``v^2/r``.
+    outliers : list of float
+        Rejected fraction of each direction's mean trace.
+    u_rad : float
+        Type A uncertainty of the result. [rad]
+    floor : NoiseFloor
+        The noise floor.
+
+    Returns
+    -------
+    dict
+        Flags, and the human-readable ``warnings`` list.
+    """
+    warnings = []
+    crb = floor.crb_rad
+    n_gaps = len(recording.gaps())
+    if clipped.size:
+        warnings.append(f"{clipped.size} samples at the sensor's full scale (clipping)")
+    if n_gaps:
+        warnings.append(f"{n_gaps} gap(s), {recording.lost_samples} samples lost")
+    if cyc.dropped:
+        reasons = sorted({d["reason"] for d in cyc.dropped})
+        warnings.append(f"{len(cyc.dropped)} cycle(s) dropped: {', '.join(reasons)}")
+    if abs(amplitude_ratio - 1) > AMPLITUDE_FLAG:
+        warnings.append(
+            f"amplitude is {amplitude_ratio:.3f} x v^2/r: feed override, radius or sensor gain "
+            f"differ from the program"
+        )
+    if abs(seg.period_disagreement) > PERIOD_FLAG:
+        warnings.append(
+            f"circle period differs from the program by {seg.period_disagreement:+.2%}: "
+            f"feed override or sample clock error"
+        )
+    if max(outliers) > OUTLIER_FLAG:
+        warnings.append(
+            f"{max(outliers):.1%} of the averaged trace rejected by the robust fit "
+            f"(reversal spikes or vibration)"
+        )
+    if u_rad < SCANT_SCATTER_FLAG * crb:
+        pairs = min(cyc.ccw.n, cyc.cw.n)
+        warnings.append(
+            f"the type A uncertainty is only {u_rad / crb:.2f} x the white-noise bound: from "
+            f"{pairs} cycle pairs the scatter is itself uncertain, and no estimate beats the "
+            f"bound; quote at least {crb / URAD:.1f} {SQUARENESS_UNIT}"
+        )
+    if u_rad > EXCESS_NOISE_FLAG * crb:
+        warnings.append(
+            f"cycle-to-cycle scatter is {u_rad / crb:.1f} x the white-noise bound "
+            f"({floor.source} noise density): vibration, 1/f noise or drift"
+        )
+    return {
+        "clipped_samples": int(clipped.size),
+        "gaps": n_gaps,
+        "lost_samples": int(recording.lost_samples),
+        "cycles_dropped": [dict(d) for d in cyc.dropped],
+        "amplitude_ratio": float(amplitude_ratio),
+        "period_disagreement": float(seg.period_disagreement),
+        "outlier_fraction": float(max(outliers)),
+        "noise_density_residual_m_s2_rthz": float(floor.residual_density_m_s2_rthz),
+        "warnings": warnings,
+    }

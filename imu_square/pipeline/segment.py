@@ -134,6 +134,23 @@ class Segmentation:
         phi_mid = block.plan.start_angle_rad + block.sign * prog.block_angle_rad / 2
         return phi_mid + block.sign * self.omega_rad_s * (np.asarray(t_s) - block.t_mid_s)
 
+    def anchor_uncertainty_rad(self, direction):
+        """Standard uncertainty of the anchor angle, averaged over one direction's blocks.
+
+        Parameters
+        ----------
+        direction : {"ccw", "cw"}
+            The direction.
+
+        Returns
+        -------
+        float
+            ``omega`` times the midpoint timing uncertainty of the mean over
+            that direction's blocks. [rad]
+        """
+        u = [b.u_t_mid_s for b in self.blocks if b.direction == direction]
+        return self.omega_rad_s * float(np.sqrt(np.sum(np.square(u)))) / len(u)
+
     def time_at(self, block, phi_rad):
         """Inverse of :meth:`phi`: time at which ``block`` is at ``phi_rad``. [s]"""
         prog = self.program
@@ -161,8 +178,14 @@ def _rotation(t, rel, period):
     """Angular speed of the acceleration vector and the fraction of samples off a circle.
 
     A first guess from the median phase step over an eighth of a period (no
-    unwrapping, robust to spikes), refined by a straight-line fit of the phase
+    unwrapping, robust to spikes), refined by a least-squares fit of the phase
     left after removing it, on the samples within 0.5 rad of uniform rotation.
+    The fit has a line and a ripple at twice the circle frequency: any ellipse
+    (a sensor's non-orthogonality, gain or scale mismatch, squareness) makes the
+    vector turn unevenly at 2 omega, and a line alone over a window that is not
+    a whole number of half-turns would take part of that ripple for a change
+    of speed (6 ppm for beta = 5 mrad at eps_c = 8 deg, enough to move
+    theta_y - theta_x by 2.6 µrad through the phase map).
     """
     z = rel[:, 0] + 1j * rel[:, 1]
     dt = float(np.median(np.diff(t)))
@@ -176,7 +199,9 @@ def _rotation(t, rel, period):
     good = np.abs(dev) < _MAX_PHASE_DEVIATION
     if np.count_nonzero(good) < 3:
         return omega0, 1.0
-    slope = np.polyfit(t[good] - tm, dev[good], 1)[0]
+    u = t[good] - tm
+    design = np.column_stack([np.ones_like(u), u, np.cos(2 * omega0 * u), np.sin(2 * omega0 * u)])
+    slope = np.linalg.lstsq(design, dev[good], rcond=None)[0][1]
     return omega0 + float(slope), 1.0 - float(np.mean(good))
 
 
@@ -249,6 +274,213 @@ def _gap_near(t, tc, guard_s):
     return None if big.size == 0 else (float(t[i0 + big[0]]), float(t[i0 + big[0] + 1]))
 
 
+@dataclass(frozen=True)
+class Motion:
+    """Where the table moved: the envelope of the horizontal acceleration and its intervals.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n_samples,)
+        Sample times from the first sample. [s]
+    rel : ndarray, shape (n_samples, 2)
+        Low-passed x and y about the rest level. [m/s^2]
+    env : ndarray, shape (n_samples,)
+        Magnitude of ``rel``. [m/s^2]
+    baseline_m_s2 : ndarray, shape (2,)
+        Rest level of x and y. [m/s^2]
+    threshold_m_s2 : float
+        Envelope level that separates motion from rest. [m/s^2]
+    intervals : list of tuple (int, int)
+        Start (inclusive) and stop (exclusive) sample of each motion interval.
+    crossings : list of tuple
+        ``((t_start, slope), (t_stop, slope))`` of each interval's threshold
+        crossings ([s], [m/s^3]); a slope of 0 means cut by the recording's edge.
+    senses : list of int
+        Rotation sense of each interval (+1 CCW, -1 CW, 0 none).
+    """
+
+    t_s: np.ndarray
+    rel: np.ndarray
+    env: np.ndarray
+    baseline_m_s2: np.ndarray
+    threshold_m_s2: float
+    intervals: list
+    crossings: list
+    senses: list
+
+    @property
+    def t_start(self):
+        """Start of motion of each interval. [s]"""
+        return [c[0][0] for c in self.crossings]
+
+    @property
+    def t_stop(self):
+        """End of motion of each interval. [s]"""
+        return [c[1][0] for c in self.crossings]
+
+
+def find_motion(t_s, accel_xy, program):
+    """Motion intervals in low-passed horizontal acceleration.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n_samples,)
+        Sample times from the first sample. [s]
+    accel_xy : ndarray, shape (n_samples, 2)
+        Low-passed sensor x and y acceleration. [m/s^2]
+    program : TestProgram
+        The program the machine ran (how much of the recording is motion).
+
+    Returns
+    -------
+    Motion
+    """
+    t_s = np.asarray(t_s, dtype=np.float64)
+    baseline = np.median(accel_xy, axis=0)
+    rel = accel_xy - baseline
+    env = np.hypot(rel[:, 0], rel[:, 1])
+    plans = program.blocks()
+    nominal = program.block_duration_s
+    duration = t_s[-1] - t_s[0] if t_s.size > 1 else 0.0
+    fraction = np.clip(len(plans) * nominal / max(duration, 1e-9), 0.02, 0.98)
+    level = float(np.quantile(env, 1 - fraction / 2))
+    thr = 0.5 * level
+    intervals = _motion_intervals(t_s, env, thr, program.period_s)
+    rest = np.ones(t_s.size, dtype=bool)
+    for a, b in intervals:
+        rest[max(a - _REST_PAD, 0) : b + _REST_PAD] = False
+    if np.count_nonzero(rest) > _REST_PAD:
+        # Re-centre on the rest level alone: the median over the whole recording
+        # is pulled by the circles, which would make start and stop asymmetric.
+        baseline = np.median(accel_xy[rest], axis=0)
+        rel = accel_xy - baseline
+        env = np.hypot(rel[:, 0], rel[:, 1])
+        intervals = _motion_intervals(t_s, env, thr, program.period_s)
+    crossings = [(_crossing(t_s, env, a, thr), _crossing(t_s, env, b, thr)) for a, b in intervals]
+    senses = [_sense(t_s, rel, c[0][0], c[1][0], program.period_s) for c in crossings]
+    return Motion(t_s, rel, env, baseline, thr, intervals, crossings, senses)
+
+
+def match_blocks(motion, program, events=()):
+    """Pick the motion interval of each planned block.
+
+    Parameters
+    ----------
+    motion : Motion
+        The motion intervals found.
+    program : TestProgram
+        The program the machine ran.
+    events : sequence of tuple (float, str, int)
+        ``(time_s, kind, block)`` of ``block_start`` / ``block_end`` markers,
+        time from the first sample; optional.
+
+    Returns
+    -------
+    list of int
+        Index into ``motion.intervals`` of each planned block, in order.
+
+    Raises
+    ------
+    AnalysisError
+        If no set of intervals matches the program.
+    """
+    plans = program.blocks()
+    nominal = program.block_duration_s
+    events_t = {}
+    starts_ev = {b: t for t, kind, b in events if kind == "block_start"}
+    for t, kind, b in events:
+        if kind == "block_end" and b in starts_ev:
+            events_t[b] = 0.5 * (starts_ev[b] + t)
+    t_start, t_stop = motion.t_start, motion.t_stop
+    chosen = _select(motion.intervals, t_start, t_stop, motion.senses, plans, events_t, nominal)
+    if chosen is None:
+        longest = max((b - a for a, b in zip(t_start, t_stop, strict=True)), default=0.0)
+        raise AnalysisError(
+            f"no circular motion matching the program: expected {len(plans)} blocks of about "
+            f"{nominal:.1f} s (period {program.period_s:.2f} s, v^2/r = "
+            f"{program.centripetal_m_s2:.3g} m/s^2), found {len(motion.intervals)} motion "
+            f"interval(s) longer than half a period, the longest {longest:.1f} s"
+        )
+    return chosen
+
+
+def check_block(motion, j, plan, program, guard_s=0.0):
+    """The block found in interval ``j``, refused unless it is a trustworthy circle.
+
+    Parameters
+    ----------
+    motion : Motion
+        The motion intervals found.
+    j : int
+        Index of the block's interval in ``motion.intervals``.
+    plan : BlockPlan
+        The program's plan of the block.
+    program : TestProgram
+        The program the machine ran.
+    guard_s : float
+        A gap within this time of the start or stop of motion makes the anchor
+        unknown. [s]
+
+    Returns
+    -------
+    Block
+
+    Raises
+    ------
+    AnalysisError
+        The motion is not a circle, turns the wrong way, is cut by the
+        recording's edge, or has a gap next to its start or stop.
+    """
+    t_s, rel, env = motion.t_s, motion.rel, motion.env
+    (t0, s0), (t1, s1) = motion.crossings[j]
+    mid = 0.5 * (t0 + t1)
+    half = 0.45 * program.cycles_per_direction * program.period_s
+    sel = (t_s >= mid - half) & (t_s <= mid + half)
+    env_s = env[sel]
+    level_s = np.median(env_s)
+    spread = float(1.4826 * np.median(np.abs(env_s - level_s)) / level_s)
+    if spread > _MAX_ENVELOPE_SPREAD:
+        raise AnalysisError(
+            f"block {plan.index} ({plan.direction}) is not a circle: the horizontal "
+            f"acceleration's magnitude varies by {spread:.0%} (robust sd; a circle keeps it "
+            f"constant at v^2/r; below {_MAX_ENVELOPE_SPREAD:.0%})"
+        )
+    omega, off = _rotation(t_s[sel], rel[sel], program.period_s)
+    if off > _MAX_OFF_CIRCLE:
+        raise AnalysisError(
+            f"block {plan.index} ({plan.direction}) is not a circle: the direction of the "
+            f"horizontal acceleration departs from uniform rotation by more than "
+            f"{_MAX_PHASE_DEVIATION} rad for {off:.0%} of the samples (a circle: none)"
+        )
+    if np.sign(omega) != plan.sign:
+        sense = "clockwise" if omega < 0 else "counter-clockwise"
+        raise AnalysisError(
+            f"block {plan.index} should run {plan.direction} but the data turn {sense}: "
+            f"check the program's order, or the sensor's mounting (upside down or "
+            f"x and y swapped)"
+        )
+    if s0 == 0.0 or s1 == 0.0:
+        raise AnalysisError(
+            f"block {plan.index} ({plan.direction}) is cut off by the "
+            f"{'start' if s0 == 0.0 else 'end'} of the recording: its motion midpoint, "
+            f"which anchors the position angle, is unknown"
+        )
+    for label, tc in (("start", t0), ("stop", t1)):
+        gap = _gap_near(t_s, tc, guard_s + 0.1 * program.period_s)
+        if gap is not None:
+            raise AnalysisError(
+                f"block {plan.index} ({plan.direction}): its {label} of motion at "
+                f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), so "
+                f"the motion midpoint that anchors the position angle is unknown"
+            )
+    # Envelope noise over its slope at each crossing, and the sampling grid
+    # (an onset between two samples is placed uniformly within dt).
+    sd = spread * level_s  # robust sd of the envelope [m/s^2]
+    quant = np.median(np.diff(t_s)) / np.sqrt(12)
+    u_mid = 0.5 * float(np.hypot(np.hypot(sd / s0, quant), np.hypot(sd / s1, quant)))
+    return Block(plan, t0, t1, u_mid, omega)
+
+
 def segment(t_s, accel_xy, program, events=(), guard_s=0.0):
     """Find the program's blocks in low-passed horizontal acceleration.
 
@@ -277,104 +509,39 @@ def segment(t_s, accel_xy, program, events=(), guard_s=0.0):
         If the data hold no circle matching the program, or a block turns the
         wrong way, or its motion is not a circle.
     """
-    t_s = np.asarray(t_s, dtype=np.float64)
-    baseline = np.median(accel_xy, axis=0)
-    rel = accel_xy - baseline
-    env = np.hypot(rel[:, 0], rel[:, 1])
-    plans = program.blocks()
-    nominal = program.block_duration_s
-    duration = t_s[-1] - t_s[0] if t_s.size > 1 else 0.0
-    fraction = np.clip(len(plans) * nominal / max(duration, 1e-9), 0.02, 0.98)
-    level = float(np.quantile(env, 1 - fraction / 2))
-    thr = 0.5 * level
-    intervals = _motion_intervals(t_s, env, thr, program.period_s)
-    rest = np.ones(t_s.size, dtype=bool)
-    for a, b in intervals:
-        rest[max(a - _REST_PAD, 0) : b + _REST_PAD] = False
-    if np.count_nonzero(rest) > _REST_PAD:
-        # Re-centre on the rest level alone: the median over the whole recording
-        # is pulled by the circles, which would make start and stop asymmetric.
-        baseline = np.median(accel_xy[rest], axis=0)
-        rel = accel_xy - baseline
-        env = np.hypot(rel[:, 0], rel[:, 1])
-        intervals = _motion_intervals(t_s, env, thr, program.period_s)
-    crossings = [(_crossing(t_s, env, a, thr), _crossing(t_s, env, b, thr)) for a, b in intervals]
-    t_start = [c[0][0] for c in crossings]
-    t_stop = [c[1][0] for c in crossings]
-    events_t = {}
-    starts_ev = {b: t for t, kind, b in events if kind == "block_start"}
-    for t, kind, b in events:
-        if kind == "block_end" and b in starts_ev:
-            events_t[b] = 0.5 * (starts_ev[b] + t)
-    senses = [
-        _sense(t_s, rel, a, b, program.period_s) for a, b in zip(t_start, t_stop, strict=True)
-    ]
-    chosen = _select(intervals, t_start, t_stop, senses, plans, events_t, nominal)
-    if chosen is None:
-        longest = max((b - a for a, b in zip(t_start, t_stop, strict=True)), default=0.0)
-        raise AnalysisError(
-            f"no circular motion matching the program: expected {len(plans)} blocks of about "
-            f"{nominal:.1f} s (period {program.period_s:.2f} s, v^2/r = "
-            f"{program.centripetal_m_s2:.3g} m/s^2), found {len(intervals)} motion interval(s) "
-            f"longer than half a period, the longest {longest:.1f} s"
-        )
-    blocks = []
-    half = 0.45 * program.cycles_per_direction * program.period_s
-    for plan, j in zip(plans, chosen, strict=True):
-        t0, t1 = t_start[j], t_stop[j]
-        mid = 0.5 * (t0 + t1)
-        sel = (t_s >= mid - half) & (t_s <= mid + half)
-        steady = rel[sel]
-        env_s = env[sel]
-        level_s = np.median(env_s)
-        spread = float(1.4826 * np.median(np.abs(env_s - level_s)) / level_s)
-        if spread > _MAX_ENVELOPE_SPREAD:
-            raise AnalysisError(
-                f"block {plan.index} ({plan.direction}) is not a circle: the horizontal "
-                f"acceleration's magnitude varies by {spread:.0%} (robust sd; a circle keeps it "
-                f"constant at v^2/r; below {_MAX_ENVELOPE_SPREAD:.0%})"
-            )
-        omega, off = _rotation(t_s[sel], steady, program.period_s)
-        if off > _MAX_OFF_CIRCLE:
-            raise AnalysisError(
-                f"block {plan.index} ({plan.direction}) is not a circle: the direction of the "
-                f"horizontal acceleration departs from uniform rotation by more than "
-                f"{_MAX_PHASE_DEVIATION} rad for {off:.0%} of the samples (a circle: none)"
-            )
-        if np.sign(omega) != plan.sign:
-            sense = "clockwise" if omega < 0 else "counter-clockwise"
-            raise AnalysisError(
-                f"block {plan.index} should run {plan.direction} but the data turn {sense}: "
-                f"check the program's order, or the sensor's mounting (upside down or "
-                f"x and y swapped)"
-            )
-        sd = spread * level_s  # robust sd of the envelope [m/s^2]
-        s0, s1 = crossings[j][0][1], crossings[j][1][1]
-        if s0 == 0.0 or s1 == 0.0:
-            raise AnalysisError(
-                f"block {plan.index} ({plan.direction}) is cut off by the "
-                f"{'start' if s0 == 0.0 else 'end'} of the recording: its motion midpoint, "
-                f"which anchors the position angle, is unknown"
-            )
-        for label, tc in (("start", t0), ("stop", t1)):
-            gap = _gap_near(t_s, tc, guard_s + 0.1 * program.period_s)
-            if gap is not None:
-                raise AnalysisError(
-                    f"block {plan.index} ({plan.direction}): its {label} of motion at "
-                    f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), so "
-                    f"the motion midpoint that anchors the position angle is unknown"
-                )
-        # Envelope noise over its slope at each crossing, and the sampling grid
-        # (an onset between two samples is placed uniformly within dt).
-        quant = np.median(np.diff(t_s)) / np.sqrt(12)
-        u_mid = 0.5 * float(np.hypot(np.hypot(sd / s0, quant), np.hypot(sd / s1, quant)))
-        blocks.append(Block(plan, t0, t1, u_mid, omega))
+    motion = find_motion(t_s, accel_xy, program)
+    chosen = match_blocks(motion, program, events)
+    blocks = tuple(
+        check_block(motion, j, plan, program, guard_s)
+        for plan, j in zip(program.blocks(), chosen, strict=True)
+    )
     weights = np.array([b.t_stop_s - b.t_start_s for b in blocks])
     omega = float(np.sum(np.abs([b.omega_rad_s for b in blocks]) * weights) / np.sum(weights))
     return Segmentation(
         program=program,
-        blocks=tuple(blocks),
+        blocks=blocks,
         omega_rad_s=omega,
-        baseline_m_s2=baseline,
-        threshold_m_s2=thr,
+        baseline_m_s2=motion.baseline_m_s2,
+        threshold_m_s2=motion.threshold_m_s2,
     )
+
+
+def block_events(recording):
+    """The block markers of a recording, as :func:`segment` takes them.
+
+    Parameters
+    ----------
+    recording : Recording
+        The recording.
+
+    Returns
+    -------
+    list of tuple (float, str, int)
+        ``(time_s, kind, block)`` from the first sample. [s]
+    """
+    t0 = int(recording.time_ns[0])
+    return [
+        ((e.time_ns - t0) * 1e-9, e.kind, e.block)
+        for e in recording.events
+        if e.kind in ("block_start", "block_end")
+    ]

@@ -11,7 +11,7 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from imu_square.errors import ProgramError
+from imu_square.errors import ProgramError, check_option
 from imu_square.program.ncgen import DIALECTS
 
 # Largest gap between the start and end radius of an arc, as the controls
@@ -147,8 +147,7 @@ def parse_nc(text, dialect):
         end radius differs from its start radius, a missing feed, or code
         after the program end.
     """
-    if dialect not in DIALECTS:
-        raise ProgramError(f"dialect must be one of {DIALECTS!r}, got {dialect!r}")
+    check_option("dialect", dialect, DIALECTS, error=ProgramError)
     trace = NcTrace()
     modes = set()
     pos = None

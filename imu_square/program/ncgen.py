@@ -59,7 +59,7 @@ References
 
 import math
 
-from imu_square.errors import ProgramError
+from imu_square.errors import ProgramError, check_option
 
 DIALECTS = ("linuxcnc", "fanuc", "sinumerik")
 
@@ -85,8 +85,7 @@ _END = {"linuxcnc": ["M2"], "fanuc": ["M30", "%"], "sinumerik": ["M30"]}
 
 
 def _check_dialect(dialect):
-    if dialect not in DIALECTS:
-        raise ProgramError(f"dialect must be one of {DIALECTS!r}, got {dialect!r}")
+    check_option("dialect", dialect, DIALECTS, error=ProgramError)
 
 
 def check_marker_mcode(marker_mcode, dialect):

@@ -25,7 +25,7 @@ import math
 import tomllib
 from dataclasses import asdict, dataclass, field
 
-from imu_square.errors import ProgramError
+from imu_square.errors import ProgramError, check_option
 from imu_square.textfile import read_text
 
 DIRECTIONS = ("ccw", "cw")
@@ -329,11 +329,9 @@ def program_from_mapping(table, source="<program>"):
     d = TestProgram()
     get = table.get
 
-    plane = get("plane", d.plane)
-    if plane not in SUPPORTED_PLANES:
-        raise ProgramError(
-            f"{source}: [program] plane must be one of {SUPPORTED_PLANES!r}, got {plane!r}"
-        )
+    plane = check_option(
+        "[program] plane", get("plane", d.plane), SUPPORTED_PLANES, source, ProgramError
+    )
     radius_mm = _number(source, "radius_mm", get("radius_mm"), float)
     if not 0 < radius_mm <= MAX_RADIUS_M * 1e3:
         raise ProgramError(

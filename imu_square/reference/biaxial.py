@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, check_option
 
 SHAPES = ("L", "T", "+")
 ORIENTATIONS_DEG = (0, 90, 180, 270)
@@ -160,12 +160,8 @@ def biaxial_squareness(
     ImuSquareError
         Unknown shape or orientation, or fewer than 3 readings per arm.
     """
-    if shape not in SHAPES:
-        raise ImuSquareError(f"shape must be one of {SHAPES!r}, got {shape!r}")
-    if orientation_deg not in ORIENTATIONS_DEG:
-        raise ImuSquareError(
-            f"orientation_deg must be one of {ORIENTATIONS_DEG!r}, got {orientation_deg!r}"
-        )
+    check_option("shape", shape, SHAPES)
+    check_option("orientation_deg", orientation_deg, ORIENTATIONS_DEG)
     if not (isinstance(n, int | np.integer) and n >= 3):
         raise ImuSquareError(f"readings per arm n must be an integer >= 3, got {n!r}")
     (x_line, sx), (y_line, sy) = _layout(shape, orientation_deg, x_range, y_range)

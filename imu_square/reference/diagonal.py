@@ -36,7 +36,7 @@ from itertools import product
 
 import numpy as np
 
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, check_option
 
 _AXES = "XYZ"
 
@@ -298,9 +298,7 @@ def body_diagonal_squareness(deviation, x_range, y_range, z_range, plane="XY"):
         Squareness, positive when the angle between the plane's first and
         second positive axes exceeds 90 deg. [rad]
     """
-    planes = ("XY", "YZ", "ZX")
-    if plane not in planes:
-        raise ImuSquareError(f"plane must be one of {planes!r}, got {plane!r}")
+    check_option("plane", plane, ("XY", "YZ", "ZX"))
     order = [_AXES.index(a) for a in plane] + [_AXES.index(a) for a in _AXES if a not in plane]
     ranges = [(x_range, y_range, z_range)[i] for i in order]
     inverse = np.argsort(order)

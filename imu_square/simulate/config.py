@@ -8,7 +8,7 @@ never silently leaves an effect off.
 import math
 import tomllib
 
-from imu_square.errors import ConfigError
+from imu_square.errors import ConfigError, check_option
 from imu_square.textfile import read_text
 
 
@@ -128,12 +128,9 @@ class Sections:
 
     def choice(self, section, key, allowed):
         """A string field, one of ``allowed``."""
-        value = self.raw(section, key)
-        if value not in allowed:
-            raise ConfigError(
-                f"{self.source}: [{section}] {key} must be one of {tuple(allowed)!r}, got {value!r}"
-            )
-        return value
+        return check_option(
+            f"[{section}] {key}", self.raw(section, key), allowed, self.source, ConfigError
+        )
 
     def text(self, section, key):
         """A string field."""

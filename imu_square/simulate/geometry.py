@@ -38,6 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from imu_square.errors import ConfigError, check_option
+
 
 @dataclass(frozen=True)
 class Geometry:
@@ -45,9 +47,9 @@ class Geometry:
 
     Attributes
     ----------
-    squareness_rad : float
+    machine_squareness_rad : float
         Squareness alpha0 at t = 0. [rad]
-    squareness_rate_rad_s : float
+    machine_squareness_rate_rad_s : float
         Linear drift of the squareness. [rad/s]
     scale_x, scale_y : float
         Scale errors s_x, s_y (``x (1 + s_x)``). [m/m]
@@ -64,8 +66,8 @@ class Geometry:
         Whether the straightness of that axis comes with its associated yaw.
     """
 
-    squareness_rad: float = 0.0
-    squareness_rate_rad_s: float = 0.0
+    machine_squareness_rad: float = 0.0
+    machine_squareness_rate_rad_s: float = 0.0
     scale_x: float = 0.0
     scale_y: float = 0.0
     straightness_x_m: float = 0.0
@@ -86,9 +88,11 @@ class Geometry:
         """Curvature term 8 S_y / L_y^2 of the Y axis. [1/m]"""
         return 8.0 * self.straightness_y_m / self.length_y_m**2
 
-    def squareness_at(self, t):
+    def machine_squareness_at(self, t):
         """Squareness alpha(t). [rad]"""
-        return self.squareness_rad + self.squareness_rate_rad_s * np.asarray(t, dtype=float)
+        return self.machine_squareness_rad + self.machine_squareness_rate_rad_s * np.asarray(
+            t, dtype=float
+        )
 
     def _coefficients(self):
         """Coefficients of dx and dy in (X, Y, X^2, XY, Y^2), squareness excluded."""
@@ -116,7 +120,7 @@ class Geometry:
         X = np.asarray(x, dtype=float) - x0
         Y = np.asarray(y, dtype=float) - y0
         (a1, a2, a3, a4, a5), (b1, b2, b3, b4, b5) = self._coefficients()
-        alpha = self.squareness_at(t)
+        alpha = self.machine_squareness_at(t)
         dx = a1 * X + (a2 - alpha) * Y + a3 * X * X + a4 * X * Y + a5 * Y * Y
         dy = b1 * X + b2 * Y + b3 * X * X + b4 * X * Y + b5 * Y * Y
         return dx, dy
@@ -152,8 +156,8 @@ class Geometry:
             (X * Y, X1 * Y + X * Y1, X2 * Y + 2 * X1 * Y1 + X * Y2),
             (Y * Y, 2 * Y * Y1, 2 * (Y1 * Y1 + Y * Y2)),
         )
-        alpha = self.squareness_at(t)
-        rate = self.squareness_rate_rad_s
+        alpha = self.machine_squareness_at(t)
+        rate = self.machine_squareness_rate_rad_s
         out = []
         for base, coeffs in zip((x, y), self._coefficients(), strict=True):
             p = [base[0].copy(), base[1].copy(), base[2].copy()]
@@ -180,7 +184,7 @@ class Geometry:
         X = np.asarray(x, dtype=float) - x0
         Y = np.asarray(y, dtype=float) - y0
         (a1, a2, a3, a4, a5), (b1, b2, b3, b4, b5) = self._coefficients()
-        alpha = self.squareness_at(t)
+        alpha = self.machine_squareness_at(t)
         return (
             a1 + 2 * a3 * X + a4 * Y,
             a2 - alpha + a4 * X + 2 * a5 * Y,
@@ -188,7 +192,7 @@ class Geometry:
             b2 + b4 * X + 2 * b5 * Y,
         )
 
-    def local_squareness(self, x, y, t=0.0):
+    def local_machine_squareness(self, x, y, t=0.0):
         """Local squareness at ``(x, y)``: ``-(d(dx)/dy + d(dy)/dx)``.
 
         This is what a ballbar circle centred at ``(x, y)`` measures.
@@ -272,11 +276,10 @@ def chapman_machine(n):
     Geometry
         Axis centre at the machine origin.
     """
-    if n not in (1, 2, 3, 4, 5):
-        raise ValueError(f"chapman_machine n must be one of (1, 2, 3, 4, 5), got {n!r}")
+    check_option("chapman_machine n", n, (1, 2, 3, 4, 5), error=ConfigError)
     s = CHAPMAN_STRAIGHTNESS_M
     return Geometry(
-        squareness_rad=CHAPMAN_SQUARENESS_RAD,
+        machine_squareness_rad=CHAPMAN_SQUARENESS_RAD,
         straightness_x_m=s if n >= 2 else 0.0,
         straightness_y_m=s if n >= 4 else 0.0,
         length_x_m=CHAPMAN_LENGTH_M,

@@ -8,7 +8,7 @@ A machine file (all sections optional; absent = ideal)::
     ramp_profile = "trapezoid"    # or "s_curve" (jerk-limited)
 
     [geometry]
-    squareness_um_per_m = 15.0    # alpha (E_C0X), + when the XY angle exceeds 90 deg
+    machine_squareness_um_per_m = 15.0  # alpha (E_C0X), + when the XY angle exceeds 90 deg
     axis_length_mm = [800.0, 800.0]
     axis_centre_mm = [0.0, 0.0]   # middle of the X and Y travels
 
@@ -52,9 +52,10 @@ A machine file (all sections optional; absent = ideal)::
     y_per_y_urad_per_m = 0.0
 """
 
+import warnings
 from dataclasses import dataclass, field
 
-from imu_square.errors import ConfigError
+from imu_square.errors import ConfigError, ImuSquareWarning
 from imu_square.simulate.config import Sections, load_toml
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.trajectory import RAMP_PROFILES
@@ -123,8 +124,8 @@ class MachineModel:
         """
         g = self.geometry
         out = {}
-        if g.squareness_rate_rad_s:
-            out["squareness_drift"] = {"rate_rad_s": g.squareness_rate_rad_s}
+        if g.machine_squareness_rate_rad_s:
+            out["squareness_drift"] = {"rate_rad_s": g.machine_squareness_rate_rad_s}
         if g.scale_x or g.scale_y:
             out["scale_mismatch"] = {"scale_x": g.scale_x, "scale_y": g.scale_y}
         if g.straightness_x_m or g.straightness_y_m:
@@ -169,10 +170,14 @@ class MachineModel:
         return out
 
 
+# The name of machine_squareness_um_per_m until 0.1; read, with a warning, for one release.
+_LEGACY_SQUARENESS_KEY = "squareness_um_per_m"
+
 _LAYOUT = {
     "machine": {"name": "machine", "ramp_s": 0.15, "ramp_profile": "trapezoid"},
     "geometry": {
-        "squareness_um_per_m": 0.0,
+        "machine_squareness_um_per_m": 0.0,
+        _LEGACY_SQUARENESS_KEY: 0.0,
         "axis_length_mm": [800.0, 800.0],
         "axis_centre_mm": [0.0, 0.0],
     },
@@ -195,6 +200,25 @@ _LAYOUT = {
         "y_per_y_urad_per_m": 0.0,
     },
 }
+
+
+def _squareness_key(sections, source):
+    """The [geometry] field that holds alpha: the new name, or the old one with a warning."""
+    written = sections.doc.get("geometry", {})
+    if _LEGACY_SQUARENESS_KEY not in written:
+        return "machine_squareness_um_per_m"
+    if "machine_squareness_um_per_m" in written:
+        raise ConfigError(
+            f"{source}: [geometry] has both machine_squareness_um_per_m and its old name "
+            f"{_LEGACY_SQUARENESS_KEY}: keep machine_squareness_um_per_m only"
+        )
+    warnings.warn(
+        f"{source}: [geometry] {_LEGACY_SQUARENESS_KEY} is now machine_squareness_um_per_m; "
+        f"the old name is read until the next release",
+        ImuSquareWarning,
+        stacklevel=3,
+    )
+    return _LEGACY_SQUARENESS_KEY
 
 
 def machine_from_mapping(doc, source="<machine>"):
@@ -223,8 +247,8 @@ def machine_from_mapping(doc, source="<machine>"):
         raw = s.raw("geometry", "axis_length_mm")
         raise ConfigError(f"{source}: [geometry] axis_length_mm must be positive, got {raw!r}")
     geometry = Geometry(
-        squareness_rad=s.number("geometry", "squareness_um_per_m", UM, -1e4, 1e4),
-        squareness_rate_rad_s=s.number(
+        machine_squareness_rad=s.number("geometry", _squareness_key(s, source), UM, -1e4, 1e4),
+        machine_squareness_rate_rad_s=s.number(
             "squareness_drift", "rate_um_per_m_per_h", UM / HOUR, -1e4, 1e4
         ),
         scale_x=s.number("scale_mismatch", "x_um_per_m", UM, -1e4, 1e4),

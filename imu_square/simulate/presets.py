@@ -75,7 +75,7 @@ def _machine_changes(name, m):
             "vibration_damping": 0.05,
         }
     if name == "squareness_drift":
-        return {"geometry": replace(g, squareness_rate_rad_s=1e-8)}
+        return {"geometry": replace(g, machine_squareness_rate_rad_s=1e-8)}
     return None
 
 

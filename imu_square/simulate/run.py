@@ -116,7 +116,7 @@ def simulate_run(
         ),
         machine_id=machine.name,
         events=_events(timeline, clock_factor, t0_ns) if events else [],
-        metadata={"source": "imu_square.simulate", "seed": str(seed)},
+        metadata={"producer": "imu-square simulate", "seed": str(seed)},
     )
     truth = build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns)
     truth["n_samples"] = n

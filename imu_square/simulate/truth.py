@@ -5,24 +5,22 @@ drift (squareness drift, the sensor's warm-up) are time means over the
 analysed whole cycles of all blocks, which is what a fit over those cycles
 measures to first order.
 
-Keys:
+Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
 
-- ``alpha_rad``: machine squareness (E_C0X); ``beta_rad``: sensor
-  non-orthogonality (E_SC0X); ``squareness_rad = alpha + beta``, the global
-  measurand (paper Eq. 4). It is what ``theta_y - theta_x`` measures only on
-  a machine without straightness errors or gravity coupling, see
-  ``expected_theta_diff_rad``;
-- ``local_squareness_rad``: the squareness a ballbar sees on this circle,
-  from the geometry alone (straightness/yaw included, sensor excluded);
-- ``expected_theta_diff_rad = local_squareness + beta + gravity_phase``:
-  what ``theta_y - theta_x`` (mean of CCW and flipped CW) should give on
-  this run, to first order in every error;
-- ``expected_theta_diff_exact_rad``: the same without the first-order
-  approximation in the sensor rotation: the local Jacobian ``J`` of the
-  error map and the gravity coupling ``K`` act on the commanded acceleration
-  as ``M = I + J - (g r / A) K``, the sensor turns it by
-  ``-(eps_c + carriage_yaw)`` and leans its y axis by ``beta``, and the
-  thetas are read off exactly (``alpha`` shows as ``alpha cos(2 eps_c)``);
+- ``machine_squareness_rad``: the machine's squareness alpha (E_C0X);
+  ``sensor_squareness_rad``: the sensor's non-orthogonality beta (E_SC0X);
+  ``squareness_rad = alpha + beta``, the global measurand (paper Eq. 4). It
+  is what ``theta_y - theta_x`` measures only on a machine without
+  straightness errors or gravity coupling and a sensor square to the axes, see
+  ``expected_squareness_rad``;
+- ``local_machine_squareness_rad``: the squareness a ballbar sees on this
+  circle, from the geometry alone (straightness/yaw included, sensor excluded);
+- ``expected_squareness_rad``: what ``theta_y - theta_x`` (mean of CCW and
+  flipped CW) should read on this run: the local Jacobian ``J`` of the error
+  map and the gravity coupling ``K`` act on the commanded acceleration as
+  ``M = I + J - (g r / A) K``, the sensor turns it by ``-(eps_c +
+  carriage_yaw)`` and leans its y axis by ``beta``, and the thetas are read
+  off exactly (``alpha`` shows as ``alpha cos(2 eps_c)``);
 - ``eps_c_rad``: sensor mounting rotation; ``carriage_yaw_rad``: the
   carriage's yaw at the circle centre (associated yaw), which adds to it;
 - ``servo_mismatch_rad = omega (tau_y - tau_x)``;
@@ -38,7 +36,9 @@ Keys:
   from the first sample, and ``analysed_start_s`` / ``analysed_end_s`` (the whole cycles
   between the overshoots);
 - ``reversal_times_s``: ``{"x": [...], "y": [...]}``, when each actual axis
-  reverses (servo lag included), from the first sample.
+  reverses (servo lag included), from the first sample;
+- the keys of :data:`LEGACY_KEYS`, written until the next release under their
+  old names.
 """
 
 import math
@@ -46,6 +46,17 @@ import math
 import numpy as np
 
 from imu_square.units import G
+
+# Keys an earlier release wrote, each with the key that replaces it. They are
+# still written for one release; ``expected_theta_diff_rad`` was the first-order
+# form of ``expected_squareness_rad`` and keeps its old value.
+LEGACY_KEYS = {
+    "alpha_rad": "machine_squareness_rad",
+    "beta_rad": "sensor_squareness_rad",
+    "local_squareness_rad": "local_machine_squareness_rad",
+    "expected_theta_diff_exact_rad": "expected_squareness_rad",
+    "expected_theta_diff_rad": "expected_squareness_rad",
+}
 
 
 def _gravity_phases(program, machine):
@@ -102,7 +113,7 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
     durations = np.array([b - a for a, b in windows])
     mids = np.array([0.5 * (a + b) for a, b in windows])
     t_mean = float(np.sum(mids * durations) / np.sum(durations))
-    alpha = float(geometry.squareness_at(t_mean))
+    alpha = float(geometry.machine_squareness_at(t_mean))
     beta = float(
         sum(sensor.mean_beta(a, b) * (b - a) for a, b in windows) / float(np.sum(durations))
     )
@@ -129,18 +140,15 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
     for axis, name, tau in ((0, "x", machine.tau_x_s), (1, "y", machine.tau_y_s)):
         times, _, _ = timeline.reversals(axis)
         reversals[name] = [(t + tau) * clock_factor for t in times]
-    local = float(geometry.local_squareness(cx, cy, t_mean)) + 0.0
+    local = float(geometry.local_machine_squareness(cx, cy, t_mean)) + 0.0
     yaw = float(geometry.carriage_yaw(cx, cy))
+    expected = _exact_theta_diff(program, machine, (beta, t_mean), sensor.eps_c_rad + yaw) + 0.0
     return {
-        "alpha_rad": alpha,
-        "beta_rad": beta,
+        "machine_squareness_rad": alpha,
+        "sensor_squareness_rad": beta,
         "squareness_rad": alpha + beta,
-        "local_squareness_rad": local,
-        "expected_theta_diff_rad": local + beta + theta_gy - theta_gx,
-        "expected_theta_diff_exact_rad": _exact_theta_diff(
-            program, machine, (beta, t_mean), sensor.eps_c_rad + yaw
-        )
-        + 0.0,
+        "local_machine_squareness_rad": local,
+        "expected_squareness_rad": expected,
         "eps_c_rad": sensor.eps_c_rad,
         "carriage_yaw_rad": yaw,
         "servo_mismatch_rad": omega * (machine.tau_y_s - machine.tau_x_s),
@@ -157,4 +165,10 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
         "program": program.to_mapping(),
         "blocks": blocks,
         "reversal_times_s": reversals,
+        # legacy keys (LEGACY_KEYS), for one release
+        "alpha_rad": alpha,
+        "beta_rad": beta,
+        "local_squareness_rad": local,
+        "expected_theta_diff_exact_rad": expected,
+        "expected_theta_diff_rad": local + beta + theta_gy - theta_gx,
     }

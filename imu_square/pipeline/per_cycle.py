@@ -1,0 +1,129 @@
+"""Every cycle fitted on its own, and bootstrap resamples, in one batch.
+
+CCW cycle k and CW cycle k form a pair (:mod:`imu_square.pipeline.align`);
+each pair gives its own ``theta_y - theta_x`` (the mean of its two cycles),
+servo mismatch and ``eps_c``. Their scatter is the type A uncertainty, and
+their times (and temperatures) let the monitor regress the drift within a
+night. The bootstrap resamples whole cycles within each direction and refits
+the means. All rows share one phi grid, so they are solved as one vectorised
+IRLS batch, each started from its direction's fit of the mean.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imu_square.pipeline.fit import fit_circle, wrap_angle
+from imu_square.pipeline.uncertainty import bootstrap_means
+
+
+@dataclass(frozen=True)
+class CycleFits:
+    """Per-pair values and the bootstrap spread.
+
+    Attributes
+    ----------
+    pair : ndarray of int, shape (n_pairs,)
+        Pairing key of each CCW/CW pair.
+    squareness_rad : ndarray, shape (n_pairs,)
+        ``theta_y - theta_x``, mean of the pair's CCW and flipped CW cycle. [rad]
+    squareness_ccw_rad, squareness_cw_rad : ndarray, shape (n_pairs,)
+        ``theta_y - theta_x`` of the pair's CCW and of its flipped CW cycle. [rad]
+    servo_mismatch_rad : ndarray, shape (n_pairs,)
+        Half their difference over ``cos(2 eps_c)``. [rad]
+    eps_c_rad : ndarray, shape (n_pairs,)
+        Mean of the two cycles' ``(theta_x + theta_y) / 2``. [rad]
+    t_ccw_s, t_cw_s : ndarray, shape (n_pairs,)
+        Middle of each cycle, from the first sample. [s]
+    u_bootstrap_rad : float
+        Standard deviation of ``theta_y - theta_x`` over the bootstrap
+        resamples; NaN when skipped. [rad]
+    """
+
+    pair: np.ndarray
+    squareness_rad: np.ndarray
+    squareness_ccw_rad: np.ndarray
+    squareness_cw_rad: np.ndarray
+    servo_mismatch_rad: np.ndarray
+    eps_c_rad: np.ndarray
+    t_ccw_s: np.ndarray
+    t_cw_s: np.ndarray
+    u_bootstrap_rad: float
+
+    @property
+    def n_pairs(self):
+        """Number of CCW/CW pairs."""
+        return int(self.pair.size)
+
+
+def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0, seed=0):
+    """Fit every cycle and ``bootstrap_n`` resampled means per direction.
+
+    Parameters
+    ----------
+    cycles : CycleTraces
+        The flipped, resampled cycles.
+    mean_fit : MeanFit
+        Fits of the mean traces, the starting point of every row.
+    cos_2eps_c : float
+        ``cos(2 eps_c)``, which scales the servo mismatch (``docs/model.md``).
+    period_s : float
+        Measured circle period, to place each cycle's middle. [s]
+    norm : statsmodels.robust.norms.RobustNorm
+        The robust norm.
+    irls : dict
+        IRLS options for :func:`imu_square.pipeline.fit.fit_irls`.
+    bootstrap_n : int
+        Resamples per direction; 0 skips the bootstrap.
+    seed : int
+        Seed of the bootstrap.
+
+    Returns
+    -------
+    CycleFits
+    """
+    ccw, cw = cycles.ccw, cycles.cw
+    rows_x, rows_y = [ccw.x, cw.x], [ccw.y, cw.y]
+    if bootstrap_n > 0:
+        rng = np.random.default_rng(seed)
+        rows_x += [
+            bootstrap_means(ccw.x, bootstrap_n, rng),
+            bootstrap_means(cw.x, bootstrap_n, rng),
+        ]
+        rows_y += [
+            bootstrap_means(ccw.y, bootstrap_n, rng),
+            bootstrap_means(cw.y, bootstrap_n, rng),
+        ]
+    counts = [ccw.n, cw.n] + ([bootstrap_n, bootstrap_n] if bootstrap_n > 0 else [])
+    which = np.repeat([0, 1, 0, 1][: len(counts)], counts)
+    main = mean_fit.fit
+    batch = fit_circle(
+        cycles.phi_grid,
+        np.concatenate(rows_x),
+        np.concatenate(rows_y),
+        norm,
+        start_params=(main.x.params[which], main.y.params[which]),
+        **irls,
+    )
+    n1, n2 = ccw.n, cw.n
+    sq = wrap_angle(batch.squareness)
+    mp = batch.mean_phase
+    if bootstrap_n > 0:
+        b = n1 + n2
+        boot = 0.5 * (sq[b : b + bootstrap_n] + sq[b + bootstrap_n : b + 2 * bootstrap_n])
+        u_boot = float(np.std(boot, ddof=1))
+    else:
+        u_boot = float("nan")
+    common, i1, i2 = np.intersect1d(ccw.pair, cw.pair, return_indices=True)
+    sq_ccw, sq_cw = sq[:n1][i1], sq[n1 : n1 + n2][i2]
+    return CycleFits(
+        pair=common,
+        squareness_rad=0.5 * (sq_ccw + sq_cw),
+        squareness_ccw_rad=sq_ccw,
+        squareness_cw_rad=sq_cw,
+        servo_mismatch_rad=0.5 * (sq_ccw - sq_cw) / cos_2eps_c,
+        eps_c_rad=0.5 * (mp[:n1][i1] + mp[n1 : n1 + n2][i2]),
+        t_ccw_s=ccw.t_start_s[i1] + 0.5 * period_s,
+        t_cw_s=cw.t_start_s[i2] + 0.5 * period_s,
+        u_bootstrap_rad=u_boot,
+    )

@@ -1,0 +1,67 @@
+"""The JSON keys written are exactly those of docs/model.md's "Quantity names" table."""
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from imu_square.cli import main
+
+MODEL_MD = Path(__file__).resolve().parents[1] / "docs" / "model.md"
+RECORDING = Path(__file__).resolve().parents[1] / "recordings" / "square_20um.mcap"
+
+
+def _table(heading_pattern):
+    """Rows of the first table after the heading or paragraph matching the pattern."""
+    text = MODEL_MD.read_text(encoding="utf-8")
+    start = re.search(heading_pattern, text).end()
+    rows = []
+    for line in text[start:].splitlines():
+        if line.startswith("|"):
+            rows.append([c.strip() for c in line.strip("|").split("|")])
+        elif rows:
+            break
+    return rows[2:]  # past the header and the ---|--- line
+
+
+def _documented():
+    keys = {}
+    for row in _table(r"## Quantity names"):
+        for group in (g.strip() for g in row[1].split(",")):
+            keys.setdefault(group, set()).update(re.findall(r"`([^`]+)`", row[0]))
+    legacy = {}
+    for row in _table(r"\*\*Kept for one release\*\*"):
+        legacy.setdefault(row[1], set()).update(re.findall(r"`([^`]+)`", row[0]))
+    return keys, legacy
+
+
+def test_the_table_parses():
+    keys, legacy = _documented()
+    assert {"analyze", "direction", "per_cycle", "truth"} <= set(keys)
+    assert "machine_squareness_rad" in keys["truth"]
+    assert legacy["truth"] == {
+        "alpha_rad",
+        "beta_rad",
+        "local_squareness_rad",
+        "expected_theta_diff_exact_rad",
+        "expected_theta_diff_rad",
+    }
+
+
+@pytest.mark.slow
+def test_analyze_json_and_truth_keys_match_the_table(tmp_path, capsys):
+    keys, legacy = _documented()
+    assert main(["analyze", str(RECORDING), "--json", "--bootstrap", "0"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc) == keys["analyze"] | legacy["analyze"]
+    assert set(doc["ccw"]) == set(doc["cw"]) == keys["direction"]
+    assert set(doc["per_cycle"]) == keys["per_cycle"]
+
+    out = tmp_path / "run.mcap"
+    assert main(["simulate", "-o", str(out), "--effects", "servo_mismatch"]) == 0
+    truth = json.loads((tmp_path / "run.truth.json").read_text())
+    assert set(truth) == keys["truth"] | legacy["truth"]
+    # a legacy key keeps its value beside the key that replaces it
+    assert truth["alpha_rad"] == truth["machine_squareness_rad"]
+    assert truth["expected_theta_diff_exact_rad"] == truth["expected_squareness_rad"]
