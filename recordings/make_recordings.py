@@ -20,7 +20,7 @@ CONFIG = HERE / "config"
 RECORDINGS = {
     "square_20um": (
         ["--machine", CONFIG / "machine_square.toml", "--seed", "1"],
-        "+20 um/m squareness only; the sensor adds 10 urad of its own non-orthogonality",
+        "+20 µm/m machine squareness only; the sensor adds 10 µm/m of its own non-orthogonality",
     ),
     "typical_machine": (
         [
