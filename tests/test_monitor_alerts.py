@@ -13,7 +13,7 @@ import pytest
 from alert_servers import Hook, Mailbox, free_port
 
 import imu_square.monitor
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, MonitorError
 from imu_square.monitor.alert_config import alerts_from_mapping
 from imu_square.monitor.alert_types import make_alert, one_line
 from imu_square.monitor.alerts import deliver_pending, send_alerts
@@ -158,6 +158,28 @@ def test_an_unwritable_outbox_does_not_stop_delivery_and_a_lost_alert_is_in_the_
         report.alert.alert_id in r.getMessage() and "not delivered and not kept" in r.getMessage()
         for r in caplog.records
     )
+
+
+def test_a_broken_outbox_is_one_clear_error_alone_and_only_logged_within_send(tmp_path, caplog):
+    # A name clash with a folder: os.replace fails whoever runs the test, root included.
+    outbox = tmp_path / "outbox"
+    name = "20260101T000000.000000Z-0123456789abcdef0123456789abcdef-kept.json"
+    (outbox / "rejected").mkdir(parents=True)
+    (outbox / "rejected" / name).write_text("{}")
+    (outbox / name).mkdir()
+    path = tmp_path / "a.json"
+    config = alerts_from_mapping({"json_file": {"name": "kept", "path": str(path)}})
+    with pytest.raises(MonitorError, match=r"outbox: cannot read the alert outbox: .*directory"):
+        deliver_pending(config, outbox, include_rejected=True)
+    # An unreadable entry that cannot even be set aside: logged, and tonight's alert still goes.
+    (outbox / name).rmdir()
+    (outbox / name).write_text("{not json")
+    (outbox / "rejected" / name).unlink()
+    (outbox / "rejected" / name).mkdir()
+    report = send(config, outbox)
+    assert by_sink(report)["kept"].status == "sent" and path.exists()
+    assert report.backlog == ()
+    assert any("unexpected error in kept" in r.getMessage() for r in caplog.records)
 
 
 def test_entries_of_a_removed_sink_and_unreadable_entries_are_set_aside(tmp_path, caplog):

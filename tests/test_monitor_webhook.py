@@ -244,6 +244,9 @@ def test_url_and_token_come_from_the_environment_and_their_absence_is_a_configur
         monkeypatch.setenv("HOOK_TOKEN", "evil\r\nX-Injected: 1")
         injected = outcome(send(config, tmp_path / "c"))
         monkeypatch.setenv("HOOK_TOKEN", "good")
+        monkeypatch.setenv("HOOK_URL", "http://hooks.example.com/in-clear")
+        in_clear = outcome(send(config, tmp_path / "e"))
+        monkeypatch.setenv("HOOK_URL", f"{hook.url}/from-env")
         sent = outcome(send(config, tmp_path / "d"))
     assert missing_url.status == "rejected" and "HOOK_URL (url_env) is not set" in missing_url.error
     assert (
@@ -251,6 +254,7 @@ def test_url_and_token_come_from_the_environment_and_their_absence_is_a_configur
         and "HOOK_TOKEN (token_env) is not set" in missing_token.error
     )
     assert injected.status == "rejected" and "without CR, LF" in injected.error
+    assert in_clear.status == "rejected" and "would cross the network in clear" in in_clear.error
     assert sent.status == "sent"
     (request,) = hook.requests
     assert request["path"] == "/from-env" and request["headers"]["Authorization"] == "Bearer good"

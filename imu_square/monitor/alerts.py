@@ -31,11 +31,10 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from imu_square.errors import MonitorError
 from imu_square.log import logger
 from imu_square.monitor import alert_outbox as outbox
 from imu_square.monitor.alert_types import DeliveryError, make_alert
-
-OUTCOME_STATUSES = ("sent", "skipped", "pending", "rejected", "failed")
 
 
 @dataclass(frozen=True)
@@ -141,17 +140,16 @@ def send_alerts(config, record, *, machine_id, state, verdict, outbox_dir=None, 
     """
     folder = _outbox(config, outbox_dir)
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict, now=now)
-    backlog = deliver_pending(config, folder)
+    backlog = _safely("the outbox", deliver_pending, config, folder) or ()
     selected = [s for s in config.sinks if state in s.states]
     deadline = time.monotonic() + config.retry.max_total_s
+
+    def send(sink):
+        done = _safely(sink.name, _send_new, sink, alert, config.retry, deadline, folder)
+        return done or SinkOutcome(sink.name, alert.alert_id, state, "failed", error="see the log")
+
     with ThreadPoolExecutor(max_workers=max(1, len(selected))) as pool:
-        done = dict(
-            zip(
-                [s.name for s in selected],
-                pool.map(lambda s: _send_new(s, alert, config.retry, deadline, folder), selected),
-                strict=True,
-            )
-        )
+        done = dict(zip([s.name for s in selected], pool.map(send, selected), strict=True))
     outcomes = tuple(
         done.get(s.name) or SinkOutcome(s.name, alert.alert_id, state, "skipped")
         for s in config.sinks
@@ -182,29 +180,47 @@ def deliver_pending(config, outbox_dir=None, *, include_rejected=False):
     -------
     tuple of SinkOutcome
         One per entry tried or left pending, sink by sink, oldest first.
+
+    Raises
+    ------
+    MonitorError
+        If the outbox folder cannot be read (a sink's failure never raises).
     """
     folder = _outbox(config, outbox_dir)
-    if include_rejected:
-        moved = outbox.requeue_rejected(folder)
-        if moved:
-            logger.info("alert outbox %s: %d rejected alert(s) queued again", folder, moved)
     by_sink = {}
-    for path in outbox.pending_paths(folder):
-        by_sink.setdefault(outbox.sink_of(path), []).append(path)
+    try:
+        if include_rejected:
+            moved = outbox.requeue_rejected(folder)
+            if moved:
+                logger.info("alert outbox %s: %d rejected alert(s) queued again", folder, moved)
+        for path in outbox.pending_paths(folder):
+            by_sink.setdefault(outbox.sink_of(path), []).append(path)
+    except OSError as exc:
+        raise MonitorError(f"{folder}: cannot read the alert outbox: {exc}") from None
     if not by_sink:
         return ()
     deadline = time.monotonic() + config.retry.max_total_s
     results = []
     for name in [n for n in by_sink if config.sink(n) is None]:
-        results += [_orphan(path, name) for path in by_sink.pop(name)]
+        results += [_safely(path.name, _orphan, path, name) for path in by_sink.pop(name)]
     with ThreadPoolExecutor(max_workers=max(1, len(by_sink))) as pool:
         jobs = [
-            pool.submit(_send_backlog, config.sink(name), paths, config.retry, deadline)
+            pool.submit(_safely, name, _send_backlog, config.sink(name), paths, config.retry,
+                        deadline)
             for name, paths in by_sink.items()
-        ]
+        ]  # fmt: skip
         for job in jobs:
-            results += job.result()
+            results += job.result() or []
     return tuple(r for r in results if r is not None)
+
+
+def _safely(what, function, *args):
+    """``function(*args)``, or None after logging an unexpected error: delivery never raises."""
+    try:
+        return function(*args)
+    except Exception:
+        logger.exception("alert delivery: unexpected error in %s", what)
+        return None
 
 
 def _outbox(config, outbox_dir):

@@ -38,6 +38,7 @@ import urllib.error
 import urllib.parse
 import urllib.request
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from imu_square import __version__
 from imu_square.monitor.alert_types import DEFAULT_ALERT_STATES, STATES, DeliveryError
@@ -63,6 +64,10 @@ _TOKEN = re.compile(r"[!#$%&'*+\-.^_`|~0-9A-Za-z]+")  # RFC 9110 header-name cha
 HEADER_TEXT = (
     "Latin-1 text without CR, LF or other control characters (HTTP sends header values "
     "as bytes; ASCII is safest)"
+)
+CLEAR_TOKEN = (
+    "an https:// URL when token_env is set (over http:// the token would cross the network "
+    "in clear; plain http is allowed only to localhost)"
 )
 _READ_LIMIT = 4096  # bytes of a reply kept for the log
 
@@ -106,7 +111,7 @@ class WebhookSink:
     token_env: str | None = None
     token_header: str = "Authorization"
     token_prefix: str = "Bearer "
-    ca_file: object = None
+    ca_file: Path | None = None
     kind = "webhook"
 
     def deliver(self, alert, timeout_s=None):
@@ -160,9 +165,12 @@ class WebhookSink:
                 f"the environment variable {self.url_env} (url_env) is not set", permanent=True
             )
         try:
-            return check_url(url)
+            url = check_url(url)
         except ValueError as exc:
             raise DeliveryError(f"${self.url_env} {exc}", permanent=True) from None
+        if self.token_env is not None and _clear_to_network(url):
+            raise DeliveryError(f"${self.url_env} must be {CLEAR_TOKEN}", permanent=True)
+        return url
 
     def _headers(self, alert):
         headers = {
@@ -227,6 +235,12 @@ def _retry_after(value):
     except (TypeError, ValueError):
         return None
     return seconds if 0 <= seconds < 86400 else None
+
+
+def _clear_to_network(url):
+    """Whether ``url`` is plain http to another machine."""
+    parts = urllib.parse.urlsplit(url)
+    return parts.scheme.lower() == "http" and not is_loopback(parts.hostname)
 
 
 def is_header_text(text):
@@ -351,15 +365,8 @@ def webhook_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
         table.fail("token_header", "a header name (RFC 9110 token characters)", token_header)
     if token_env is not None and token_header.lower() in (k.lower() for k in headers):
         table.fail("token_header", "a header that headers does not also set", token_header)
-    if token_env is not None and url is not None:
-        parts = urllib.parse.urlsplit(url)
-        if parts.scheme.lower() == "http" and not is_loopback(parts.hostname):
-            table.fail(
-                "url",
-                "an https:// URL when token_env is set (over http:// the token would cross "
-                "the network in clear; plain http is allowed only to localhost)",
-                url,
-            )
+    if token_env is not None and url is not None and _clear_to_network(url):
+        table.fail("url", CLEAR_TOKEN, url)
     return WebhookSink(
         name=name,
         states=table.choices("states", default_states, STATES),
