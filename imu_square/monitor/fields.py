@@ -179,17 +179,6 @@ class Table:
             self.fail(key, f"a list of distinct values from {tuple(allowed)!r}", value)
         return tuple(value)
 
-    def text_list(self, key, default=REQUIRED):
-        """A non-empty list of one-line, non-empty strings, as a tuple."""
-        value = self.get(key, default)
-        if (
-            not isinstance(value, list)
-            or not value
-            or any(not isinstance(v, str) or not v or has_control_chars(v) for v in value)
-        ):
-            self.fail(key, "a non-empty list of one-line strings", value)
-        return tuple(value)
-
     def env_name(self, key):
         """The name of an environment variable (letters, digits, ``_``), or None if absent."""
         value = self.get(key, None)
