@@ -22,6 +22,14 @@ class ConfigError(ImuSquareError):
     """A machine or sensor description (TOML) is malformed."""
 
 
+class MonitorConfigError(ConfigError):
+    """The monitor file (TOML) is malformed: a field names something impossible."""
+
+
+class MonitorError(ImuSquareError):
+    """The monitor cannot write one of its own files (metrics, alert outbox)."""
+
+
 class AnalysisError(ImuSquareError):
     """The data cannot give a trustworthy squareness (too few cycles, no motion, ...)."""
 

@@ -1,0 +1,1 @@
+"""The squareness monitor: history, baseline, drift, alarms, alerts, metrics and report."""

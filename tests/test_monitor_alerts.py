@@ -1,0 +1,305 @@
+"""Alert sinks end to end: the log, JSON files, the outbox's corner cases, and no shell anywhere."""
+
+import datetime as dt
+import json
+import logging
+import math
+import re
+import stat
+import urllib.parse
+from pathlib import Path
+
+import pytest
+from alert_servers import Hook, Mailbox, free_port
+
+import imu_square.monitor
+from imu_square.errors import ImuSquareError, MonitorError
+from imu_square.monitor.alert_config import alerts_from_mapping
+from imu_square.monitor.alert_types import make_alert, one_line
+from imu_square.monitor.alerts import deliver_pending, send_alerts
+
+# aiosmtpd counts only STARTTLS as TLS and warns when AUTH is allowed without it.
+pytestmark = pytest.mark.filterwarnings("ignore:Requiring AUTH while not requiring TLS")
+
+RECORD = {"change_urad": 14.2, "u_change_urad": 3.1, "warnings": ["slow feed"]}
+
+
+def send(
+    config, outbox, state="alarm", verdict="changed", machine_id="mill-3", record=RECORD, now=None
+):
+    return send_alerts(
+        config,
+        record,
+        machine_id=machine_id,
+        state=state,
+        verdict=verdict,
+        outbox_dir=outbox,
+        now=now,
+    )
+
+
+def by_sink(report):
+    return {o.sink: o for o in report.outcomes}
+
+
+def test_the_log_line_has_a_level_per_state_and_cannot_be_split(tmp_path, caplog):
+    config = alerts_from_mapping(None)
+    caplog.set_level(logging.INFO, logger="imu_square")
+    for state, level in [("ok", "INFO"), ("stale_baseline", "WARNING"), ("alarm", "ERROR")]:
+        caplog.clear()
+        send(
+            config,
+            tmp_path,
+            state=state,
+            verdict="line one\nFAKE: second line",
+            machine_id="m\r\n1",
+        )
+        (record,) = [r for r in caplog.records if r.getMessage().startswith("alert:")]
+        assert record.levelname == level
+        assert record.getMessage() == f"alert: machine 'm 1' {state}: line one FAKE: second line"
+    # Only the log sink: nothing is written to the outbox.
+    assert not tmp_path.exists() or not list(tmp_path.iterdir())
+
+
+def test_the_latest_json_file_holds_the_newest_alert_whatever_the_delivery_order(tmp_path):
+    path = tmp_path / "latest.json"
+    config = alerts_from_mapping({"json_file": {"path": str(path)}})
+    report = send(config, tmp_path / "outbox")
+    assert by_sink(report)["json_file"].status == "sent"
+    assert json.loads(path.read_text()) == report.alert.as_dict()
+    # A dashboard running as another user can read it, and no temporary file is left.
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["latest.json", "outbox"]
+    sink = config.sink("json_file")
+    t = dt.datetime.now(dt.UTC) + dt.timedelta(days=1)
+    newer = make_alert(RECORD, machine_id="m", state="ok", verdict="newer", now=t)
+    older = make_alert(
+        RECORD, machine_id="m", state="alarm", verdict="older", now=t - dt.timedelta(days=1)
+    )
+    sink.deliver(newer)
+    sink.deliver(older)  # late, from the outbox
+    assert json.loads(path.read_text())["verdict"] == "newer"
+
+
+def test_the_append_file_is_json_lines_with_each_alert_once(tmp_path):
+    path = tmp_path / "alerts.jsonl"
+    config = alerts_from_mapping(
+        {"json_file": {"path": str(path), "mode": "append", "states": ["ok", "alarm"]}}
+    )
+    reports = [send(config, tmp_path / "o", state=s) for s in ("ok", "alarm", "warning", "ok")]
+    assert [by_sink(r)["json_file"].status for r in reports] == ["sent", "sent", "skipped", "sent"]
+    lines = path.read_text().splitlines()
+    assert [json.loads(line)["alert_id"] for line in lines] == [
+        reports[i].alert.alert_id for i in (0, 1, 3)
+    ]
+    config.sink("json_file").deliver(reports[1].alert)  # delivered twice: still one line
+    assert len(path.read_text().splitlines()) == 3
+
+
+def test_a_json_file_whose_folder_is_missing_waits_in_the_outbox_until_it_exists(tmp_path):
+    folder = tmp_path / "not-mounted"
+    config = alerts_from_mapping(
+        {"json_file": {"path": str(folder / "latest.json")}, "attempts": 2, "backoff_s": 0.01}
+    )
+    first = send(config, tmp_path / "outbox")
+    result = by_sink(first)["json_file"]
+    assert (result.status, result.attempts) == ("pending", 2)
+    assert "cannot write" in result.error and "No such file or directory" in result.error
+    folder.mkdir()
+    second = send(config, tmp_path / "outbox", state="warning")
+    assert [o.status for o in second.backlog] == ["sent"]
+    assert json.loads((folder / "latest.json").read_text())["alert_id"] == second.alert.alert_id
+
+
+def test_non_finite_numbers_become_null_and_the_report_is_json(tmp_path):
+    path = tmp_path / "a.json"
+    config = alerts_from_mapping({"json_file": {"path": str(path)}})
+    record = {
+        "change_urad": math.nan,
+        "u_change_urad": math.inf,
+        "n": [1.5, -math.inf],
+        "p": Path("/x"),
+    }
+    report = send(config, tmp_path / "o", state="invalid", record=record)
+    assert json.loads(path.read_text())["record"] == {
+        "change_urad": None, "u_change_urad": None, "n": [1.5, None], "p": "/x",
+    }  # fmt: skip
+    as_json = json.loads(json.dumps(report.as_dict(), allow_nan=False))
+    assert as_json["delivered"] is True
+    assert [o["status"] for o in as_json["outcomes"]] == ["sent", "sent"]
+
+
+def test_a_bad_state_or_record_is_refused_before_anything_is_sent(tmp_path):
+    config = alerts_from_mapping({"json_file": {"path": str(tmp_path / "a.json")}})
+    with pytest.raises(ImuSquareError, match=r"state must be one of .*got 'alarming'"):
+        send(config, tmp_path / "o", state="alarming")
+    with pytest.raises(TypeError, match=r"record.when: cannot be sent as JSON: object"):
+        send(config, tmp_path / "o", record={"when": object()})
+    assert not (tmp_path / "a.json").exists()
+    with pytest.raises(ValueError, match="no outbox folder"):
+        send_alerts(config, {}, machine_id="m", state="ok", verdict="v")
+
+
+def test_an_unwritable_outbox_does_not_stop_delivery_and_a_lost_alert_is_in_the_log(
+    tmp_path, caplog
+):
+    not_a_folder = tmp_path / "outbox"
+    not_a_folder.write_text("a file where the outbox should be")
+    with Hook() as hook:
+        report = send(alerts_from_mapping({"webhook": {"url": hook.url}}), not_a_folder)
+    assert by_sink(report)["webhook"].status == "sent" and len(hook.requests) == 1
+    caplog.clear()
+    down = alerts_from_mapping(
+        {"webhook": {"url": f"http://127.0.0.1:{free_port()}/"}, "attempts": 1}
+    )
+    report = send(down, not_a_folder)
+    assert by_sink(report)["webhook"].status == "failed"
+    assert any(
+        report.alert.alert_id in r.getMessage() and "not delivered and not kept" in r.getMessage()
+        for r in caplog.records
+    )
+
+
+def test_a_broken_outbox_is_one_clear_error_alone_and_only_logged_within_send(tmp_path, caplog):
+    # A name clash with a folder: os.replace fails whoever runs the test, root included.
+    outbox = tmp_path / "outbox"
+    name = "20260101T000000.000000Z-0123456789abcdef0123456789abcdef-kept.json"
+    (outbox / "rejected").mkdir(parents=True)
+    (outbox / "rejected" / name).write_text("{}")
+    (outbox / name).mkdir()
+    path = tmp_path / "a.json"
+    config = alerts_from_mapping({"json_file": {"name": "kept", "path": str(path)}})
+    with pytest.raises(MonitorError, match=r"outbox: cannot read the alert outbox: .*directory"):
+        deliver_pending(config, outbox, include_rejected=True)
+    # An unreadable entry that cannot even be set aside: logged, and tonight's alert still goes.
+    (outbox / name).rmdir()
+    (outbox / name).write_text("{not json")
+    (outbox / "rejected" / name).unlink()
+    (outbox / "rejected" / name).mkdir()
+    report = send(config, outbox)
+    assert by_sink(report)["kept"].status == "sent" and path.exists()
+    assert report.backlog == ()
+    assert any("unexpected error in kept" in r.getMessage() for r in caplog.records)
+
+
+def test_entries_of_a_removed_sink_and_unreadable_entries_are_set_aside(tmp_path, caplog):
+    outbox = tmp_path / "outbox"
+    port = free_port()
+    config = alerts_from_mapping(
+        {"webhook": [{"name": "old", "url": f"http://127.0.0.1:{port}/"},
+                     {"name": "kept", "url": f"http://127.0.0.1:{port}/"}], "attempts": 1}
+    )  # fmt: skip
+    report = send(config, outbox)
+    assert [o.status for o in report.outcomes] == ["sent", "pending", "pending"]
+    garbage = outbox / "20260101T000000.000000Z-0123456789abcdef0123456789abcdef-kept.json"
+    garbage.write_text("{not json")
+    with Hook(port=port) as hook:
+        later = alerts_from_mapping({"webhook": {"name": "kept", "url": hook.url}})
+        results = deliver_pending(later, outbox)
+    assert sorted((o.sink, o.status) for o in results) == [("kept", "sent"), ("old", "rejected")]
+    assert "no longer in the monitor file" in next(o.error for o in results if o.sink == "old")
+    assert len(hook.requests) == 1
+    assert sorted(p.name for p in (outbox / "rejected").iterdir()) == sorted(
+        [garbage.name, Path(next(o.outbox_path for o in results if o.sink == "old")).name]
+    )
+    assert any("not a readable outbox entry" in r.getMessage() for r in caplog.records)
+    assert list(outbox.glob("*.json")) == []
+
+
+def test_the_monitor_package_never_starts_a_process():
+    # Configured strings are data only: no code path hands one to a shell or a program.
+    forbidden = re.compile(
+        r"\bsubprocess\b|os\.system|os\.popen|os\.exec|os\.spawn|shell\s*=|\beval\(|\bexec\("
+    )
+    folder = Path(imu_square.monitor.__file__).parent
+    sources = {p.name: p.read_text() for p in folder.glob("*.py")}
+    assert "alerts.py" in sources and "sink_webhook.py" in sources
+    assert {
+        name: forbidden.findall(text) for name, text in sources.items() if forbidden.search(text)
+    } == {}
+
+
+# Shell metacharacters, quotes, non-ASCII; the markers say whether a shell ever ran them.
+SHELL = "$(touch pwned) `touch pwned`; touch pwned | touch pwned && rm -rf victim"
+QUOTES = "'single' \"double\" \\back\\slash %s {} * ?"
+LATIN1 = f"{SHELL} {QUOTES} ü µm/m"  # what an HTTP header can carry
+META = f"{LATIN1} € 測"
+META_LINES = f"{META}\nsecond line\r\nBcc: thief@localhost"
+
+
+def test_shell_metacharacters_in_every_field_of_every_sink_arrive_verbatim_and_run_nothing(
+    tmp_path, monkeypatch, caplog
+):
+    monkeypatch.chdir(tmp_path)  # where a shell running "touch pwned" would leave its mark
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "keep").write_text("still here")
+    ascii_meta = f"{SHELL} {QUOTES}"
+    monkeypatch.setenv("HOOK_TOKEN", LATIN1)
+    monkeypatch.setenv("SMTP_PASSWORD", ascii_meta)
+    secret = tmp_path / f"{SHELL} password"
+    secret.write_text(ascii_meta + "\n")
+    latest = f"{SHELL} {QUOTES} ü € latest.json"
+    every = f"{SHELL} ü every.jsonl"
+    hook_path = (
+        "/hook/$(touch%20pwned)/`touch%20pwned`;touch%20pwned|touch%20pwned&&rm%20-rf%20victim/ü"
+    )
+    hook_query = "q=$(touch%20pwned)&r='\"`id`\"'"
+    sender = f'"{ascii_meta.replace(chr(92), "").replace(chr(34), "")}" <noreply@localhost>'
+    recipient = '"$(touch pwned);`touch pwned`|touch pwned&&rm -rf victim"@localhost'
+    states = ["alarm"]
+    with Hook() as hook, Mailbox(login=(ascii_meta.encode(), ascii_meta.encode())) as box:
+        table = {
+            "states": states,
+            "log": {"states": states},
+            "json_file": [{"path": latest}, {"path": every, "mode": "append"}],
+            "webhook": [
+                {"url": f"{hook.url}{hook_path}?{hook_query}", "headers": {"X-Meta": LATIN1},
+                 "token_env": "HOOK_TOKEN", "token_prefix": f"{SHELL} "},
+            ],
+            "email": [
+                {"host": "127.0.0.1", "port": box.port, "security": "none", "sender": sender,
+                 "to": [recipient], "username": ascii_meta, "password_env": "SMTP_PASSWORD"},
+                {"host": "127.0.0.1", "port": box.port, "security": "none", "sender": sender,
+                 "to": [recipient], "username": ascii_meta, "password_file": secret.name},
+            ],
+        }  # fmt: skip
+        config = alerts_from_mapping(table, "monitor.toml", base_dir=tmp_path)
+        record = {"machine_id": META_LINES, "recording": f"/data/{META}.mcap", META: [META_LINES]}
+        report = send(
+            config, tmp_path / "outbox", machine_id=META_LINES, verdict=META_LINES, record=record
+        )
+    assert [(o.sink, o.status) for o in report.outcomes] == [
+        ("log", "sent"), ("json_file-1", "sent"), ("json_file-2", "sent"), ("webhook", "sent"),
+        ("email-1", "sent"), ("email-2", "sent"),
+    ]  # fmt: skip
+    expected = report.alert.as_dict()
+    assert expected["machine_id"] == META_LINES and expected["verdict"] == META_LINES
+    assert expected["record"] == record
+    # JSON files: at exactly the configured names, holding the alert unchanged.
+    assert json.loads((tmp_path / latest).read_text()) == expected
+    assert json.loads((tmp_path / every).read_text()) == expected
+    # Webhook: URL, headers, token and body as configured and given.
+    (request,) = hook.requests
+    path, _, query = request["path"].partition("?")
+    assert urllib.parse.unquote(path) == urllib.parse.unquote(hook_path)
+    assert query == hook_query
+    assert request["headers"]["X-Meta"] == LATIN1
+    assert request["headers"]["Authorization"] == f"{SHELL} {LATIN1}"
+    assert json.loads(request["body"]) == expected
+    # E-mail: envelope, login, headers (one line each), body.
+    assert box.logins == [(ascii_meta.encode(), ascii_meta.encode())] * 2
+    for mail in box.messages:
+        assert mail["rcpt_tos"] == [recipient] and mail["mail_from"] == "noreply@localhost"
+        msg = mail["message"]
+        assert msg["Subject"] == f"[imu-square] {one_line(META_LINES)}: alarm"
+        assert msg["From"].addresses[0].display_name == sender.split('"')[1]
+        assert msg["To"].addresses[0].addr_spec == recipient
+        assert msg["Bcc"] is None
+        assert json.loads(next(msg.iter_attachments()).get_content()) == expected
+    # The log: one line.
+    line = f"alert: machine {one_line(META_LINES)!r} alarm: {one_line(META_LINES)}"
+    assert any(r.getMessage() == line for r in caplog.records)
+    # And nothing ran.
+    assert not (tmp_path / "pwned").exists() and not Path("pwned").exists()
+    assert (victim / "keep").read_text() == "still here"
