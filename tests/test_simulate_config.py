@@ -130,7 +130,8 @@ def test_sensor_file_units(tmp_path):
     path = tmp_path / "s.toml"
     path.write_text(
         "[sensor]\nrange_g = 2\nresolution_ug = 3.9\ntilt_x_urad = 100\nbeta_urad = 20\n"
-        "[sensor_thermal_drift]\nbeta_0_urad = 120\ntau_warm_s = 100\n"
+        "temperature_c = 21.5\n"
+        "[sensor_thermal_drift]\nbeta_0_urad = 120\ntau_warm_s = 100\ntemperature_rise_c = 6\n"
         "[sensor_gain_mismatch]\ngain_percent = [0.1, -0.2, 0]\nbias_mg = [1, 0, 0]\n"
         "[sample_clock_error]\nppm = -20\n"
     )
@@ -139,6 +140,7 @@ def test_sensor_file_units(tmp_path):
     assert_allclose(s.resolution_m_s2, 3.9e-6 * 9.80665, rtol=1e-12)
     assert_allclose(s.tilt_rad, (1e-4, 0.0), rtol=1e-12)
     assert_allclose((s.beta_rad, s.beta_0_rad, s.tau_warm_s), (20e-6, 120e-6, 100.0))
+    assert (s.temperature_c, s.temperature_rise_c) == (21.5, 6.0)
     assert_allclose(s.gain, (1e-3, -2e-3, 0.0), rtol=1e-12)
     assert_allclose(s.bias_m_s2, (9.80665e-3, 0, 0), rtol=1e-12)
     assert s.clock_ppm == -20.0

@@ -1,6 +1,7 @@
 """The sensor stage: noise spectra, ADC, clipping, clock error, drift, gain, reproducibility."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -120,6 +121,26 @@ def test_thermal_drift_truth_is_the_mean_over_analysed_cycles():
     expected = np.mean(50e-6 + 200e-6 * np.exp(-t / 300.0))
     assert_allclose(truth["sensor_squareness_rad"], expected, rtol=1e-6)
     assert truth["effects"]["sensor_thermal_drift"]["tau_warm_s"] == 300.0
+
+
+def test_uptime_shifts_the_counter_and_the_warm_up():
+    """A board powered 120 s before the first sample: its counter starts at 120 s of
+    samples, beta and the temperature are 120 s into their warm-up."""
+    machine, sensor = with_effects(["sensor_thermal_drift"], None, SensorModel(beta_rad=50e-6))
+    sensor = replace(sensor, sample_rate_hz=200.0, temperature_c=21.0, temperature_rise_c=8.0)
+    rec, truth = simulate_run(PROGRAM, machine, sensor, seed=0, lead_in_s=1.0, uptime_s=120.0)
+    assert rec.seq[0] == 120 * 200 and truth["uptime_s"] == 120.0
+    t = rec.time_s + 120.0
+    assert_allclose(rec.temperature_c, 21.0 + 8.0 * (1 - np.exp(-t / 300.0)), atol=0.005)
+    windows = [(b["analysed_start_s"], b["analysed_end_s"]) for b in truth["blocks"]]
+    t = np.concatenate([np.linspace(a, b, 20001) for a, b in windows]) + 120.0
+    expected = np.mean(50e-6 + 200e-6 * np.exp(-t / 300.0))
+    assert_allclose(truth["sensor_squareness_rad"], expected, rtol=1e-6)
+
+
+def test_no_temperature_channel_unless_asked():
+    rec, _ = simulate_run(PROGRAM, MachineModel(), SensorModel(sample_rate_hz=200.0), seed=0)
+    assert rec.temperature_c is None
 
 
 def test_gain_and_bias():

@@ -1,1 +1,2 @@
-"""The squareness monitor: history, baseline, drift, alarms, alerts, metrics and report."""
+"""The squareness monitor: a machine's baseline, its history, thermal drift,
+designed alarms, alerts, metrics and the report (one module per idea)."""

@@ -48,6 +48,7 @@ def simulate_run(
     lead_out_s=3.0,
     events=True,
     t0_ns=DEFAULT_T0_NS,
+    uptime_s=0.0,
 ):
     """Simulate the accelerometer recording of a circle test.
 
@@ -68,6 +69,10 @@ def simulate_run(
         and end of each block.
     t0_ns : int
         Recording time of the first sample. [ns]
+    uptime_s : float
+        How long the sensor board has been powered at the first sample: its
+        sample counter starts there, and its warm-up (thermal drift,
+        temperature) is that far along. [s]
 
     Returns
     -------
@@ -78,7 +83,11 @@ def simulate_run(
     """
     machine = MachineModel() if machine is None else machine
     sensor = SensorModel() if sensor is None else sensor
-    for name, value in (("lead_in_s", lead_in_s), ("lead_out_s", lead_out_s)):
+    for name, value in (
+        ("lead_in_s", lead_in_s),
+        ("lead_out_s", lead_out_s),
+        ("uptime_s", uptime_s),
+    ):
         if not (math.isfinite(value) and value >= 0):
             raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}")
     if seed is None:
@@ -93,7 +102,7 @@ def simulate_run(
     pos, _, acc = carriage_motion(timeline, machine, t)
     tilt = carriage_tilt(pos, machine)
     yaw = machine.geometry.carriage_yaw(pos[:, 0], pos[:, 1])
-    f = sensor.apply_gain(sensor.sense(acc, tilt, yaw, t))
+    f = sensor.apply_gain(sensor.sense(acc, tilt, yaw, t + uptime_s))
     rng = np.random.default_rng(seed)
     if sensor.noise_density_m_s2_rthz > 0:
         f += sensor_noise(
@@ -104,7 +113,7 @@ def simulate_run(
     recording = Recording(
         accel=accel,
         time_ns=t0_ns + index * dt_ns,
-        seq=index,
+        seq=index + round(uptime_s * 1e9 / dt_ns),
         dt_ns=dt_ns,
         program=program,
         sensor=SensorInfo(
@@ -116,9 +125,10 @@ def simulate_run(
         ),
         machine_id=machine.name,
         events=_events(timeline, clock_factor, t0_ns) if events else [],
+        temperature_c=sensor.temperature_at(t + uptime_s),
         metadata={"producer": "imu-square simulate", "seed": str(seed)},
     )
-    truth = build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns)
+    truth = build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s)
     truth["n_samples"] = n
     truth["t0_ns"] = t0_ns
     return recording, truth

@@ -13,10 +13,12 @@ A sensor file (all sections optional; absent = ideal, noiseless)::
     beta_urad = 0.0                 # non-orthogonality (E_SC0X) once warm
     tilt_x_urad = 0.0               # static tilt: g*tilt leaks into x and y
     tilt_y_urad = 0.0
+    temperature_c = nan             # ambient temperature; a number adds a temperature channel
 
     [sensor_thermal_drift]          # beta(t) = beta + (beta_0 - beta) exp(-t/tau)
     beta_0_urad = 200.0             # required when the section is present
     tau_warm_s = 600.0
+    temperature_rise_c = 0.0        # the electronics warm by this much with the same tau
 
     [sensor_gain_mismatch]
     gain_percent = [0.0, 0.0, 0.0]  # x, y, z
@@ -67,6 +69,14 @@ class SensorModel:
         Non-orthogonality at power-on (thermal drift); None for no drift. [rad]
     tau_warm_s : float
         Warm-up time constant. [s]
+    temperature_c : float
+        Ambient temperature of the sensor at power-on; NaN for no temperature
+        channel. [degC]
+    temperature_rise_c : float
+        How much the sensor warms from power-on, with the time constant
+        ``tau_warm_s``: its temperature is
+        ``temperature_c + rise (1 - exp(-t / tau_warm))``, so a thermal drift
+        of ``beta`` is exactly linear in the temperature. [degC]
     tilt_rad : tuple of 2 float
         Static mounting tilt of the sensor's x and y axes (they read
         ``g * tilt`` at rest, in the sensor frame). [rad]
@@ -88,6 +98,8 @@ class SensorModel:
     beta_rad: float = 0.0
     beta_0_rad: float | None = None
     tau_warm_s: float = 600.0
+    temperature_c: float = math.nan
+    temperature_rise_c: float = 0.0
     tilt_rad: tuple = (0.0, 0.0)
     gain: tuple = (0.0, 0.0, 0.0)
     bias_m_s2: tuple = (0.0, 0.0, 0.0)
@@ -99,6 +111,15 @@ class SensorModel:
         if self.beta_0_rad is None:
             return np.full_like(t, self.beta_rad)
         return self.beta_rad + (self.beta_0_rad - self.beta_rad) * np.exp(-t / self.tau_warm_s)
+
+    def temperature_at(self, t):
+        """Sensor temperature at true time ``t`` from power-on, to 0.01 degC; None without a
+        temperature channel. [degC]"""
+        if not math.isfinite(self.temperature_c):
+            return None
+        t = np.asarray(t, dtype=float)
+        warm = self.temperature_rise_c * -np.expm1(-t / self.tau_warm_s)
+        return np.round(self.temperature_c + warm, 2)  # the wire protocol's resolution
 
     def mean_beta(self, t0, t1):
         """Mean non-orthogonality over true times [t0, t1]. [rad]"""
@@ -121,6 +142,7 @@ class SensorModel:
                 "beta_0_rad": self.beta_0_rad,
                 "beta_rad": self.beta_rad,
                 "tau_warm_s": self.tau_warm_s,
+                "temperature_rise_c": self.temperature_rise_c,
             }
         if any(self.gain) or any(self.bias_m_s2):
             out["sensor_gain_mismatch"] = {
@@ -187,8 +209,9 @@ _LAYOUT = {
         "beta_urad": 0.0,
         "tilt_x_urad": 0.0,
         "tilt_y_urad": 0.0,
+        "temperature_c": math.nan,
     },
-    "sensor_thermal_drift": {"beta_0_urad": 0.0, "tau_warm_s": 600.0},
+    "sensor_thermal_drift": {"beta_0_urad": 0.0, "tau_warm_s": 600.0, "temperature_rise_c": 0.0},
     "sensor_gain_mismatch": {"gain_percent": [0.0, 0.0, 0.0], "bias_mg": [0.0, 0.0, 0.0]},
     "sample_clock_error": {"ppm": 0.0},
 }
@@ -249,6 +272,8 @@ def sensor_from_mapping(doc, source="<sensor>"):
         if drift
         else None,
         tau_warm_s=s.number("sensor_thermal_drift", "tau_warm_s", 1.0, 0.0, 1e6, lo_open=True),
+        temperature_c=_temperature(s),
+        temperature_rise_c=s.number("sensor_thermal_drift", "temperature_rise_c", 1.0, -100, 100),
         tilt_rad=(
             s.number("sensor", "tilt_x_urad", 1e-6, -1e5, 1e5),
             s.number("sensor", "tilt_y_urad", 1e-6, -1e5, 1e5),
@@ -257,6 +282,13 @@ def sensor_from_mapping(doc, source="<sensor>"):
         bias_m_s2=_triple(s, "sensor_gain_mismatch", "bias_mg", 1e-3 * G, 1e4),
         clock_ppm=s.number("sample_clock_error", "ppm", 1.0, -1e4, 1e4),
     )
+
+
+def _temperature(s):
+    """The ambient temperature, NaN (no channel) when the file does not give one."""
+    if "temperature_c" not in s.doc.get("sensor", {}):
+        return math.nan
+    return s.number("sensor", "temperature_c", 1.0, -60.0, 150.0)
 
 
 def read_sensor(path):

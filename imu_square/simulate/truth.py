@@ -29,7 +29,8 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
 - ``omega_rad_s``, ``amplitude_m_s2 = v^2/r``, ``sample_rate_hz``,
   ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``;
 - ``effects``: the named effects that are on, with their parameters (SI);
-- ``seed``, ``program`` (file units), ``n_samples``, ``t0_ns``;
+- ``seed``, ``program`` (file units), ``n_samples``, ``t0_ns``, ``uptime_s`` (the
+  sensor's time since power-on at the first sample);
 - ``blocks``: per block ``index``, ``direction``, the start and end of the
   commanded motion (each actual axis follows its servo lag ``tau`` later)
   as ``start_ns`` / ``end_ns`` (recording clock) and ``start_s`` / ``end_s``
@@ -83,7 +84,7 @@ def _exact_theta_diff(program, machine, alpha_beta_t, eps):
     return math.remainder(diff, 2 * math.pi)  # both phases can straddle +-pi
 
 
-def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
+def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s=0.0):
     """The truth dictionary of one run.
 
     Parameters
@@ -102,6 +103,8 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
         Sensor clock time per true time, ``1 + ppm * 1e-6``.
     t0_ns : int
         Recording time of the first sample. [ns]
+    uptime_s : float
+        The sensor's time since power-on at the first sample (thermal drift). [s]
 
     Returns
     -------
@@ -115,7 +118,8 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
     t_mean = float(np.sum(mids * durations) / np.sum(durations))
     alpha = float(geometry.machine_squareness_at(t_mean))
     beta = float(
-        sum(sensor.mean_beta(a, b) * (b - a) for a, b in windows) / float(np.sum(durations))
+        sum(sensor.mean_beta(a + uptime_s, b + uptime_s) * (b - a) for a, b in windows)
+        / float(np.sum(durations))
     )
     cx, cy = program.centre_m
     omega = program.omega_rad_s
@@ -162,6 +166,7 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
         "ramp_profile": machine.ramp_profile,
         "effects": effects,
         "seed": seed,
+        "uptime_s": uptime_s,
         "program": program.to_mapping(),
         "blocks": blocks,
         "reversal_times_s": reversals,

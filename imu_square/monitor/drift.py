@@ -1,0 +1,278 @@
+"""Thermal drift of the measurand: first-order regressions (paper, Section 4 [1]_).
+
+The sensor's own non-orthogonality drifts while its electronics warm up, and
+``theta_y - theta_x`` drifts with it; the paper "compensated with the
+application of a first-order regression". Two regressions, both ordinary least
+squares from ``statsmodels`` with its standard errors:
+
+- **within a night**, over the cycles: each CCW and each flipped CW cycle's
+  ``theta_y - theta_x`` against the sensor temperature over that cycle (or,
+  without a temperature channel, the time since the board was powered), with a
+  CCW/CW indicator, because the servo mismatch adds ``+m`` to CCW and ``-m`` to
+  CW and all CCW cycles come before all CW cycles::
+
+      s_j = a + m' d_j + b (x_j - x_ref)        d_j = +1 (CCW), -1 (CW)
+
+  ``a`` is the night's value corrected to the reference ``x_ref``. With one CCW
+  block then one CW block the slope is learnt from the trend *within* each
+  block, so its price is an inflated uncertainty of ``a`` (stated).
+- **across nights**, over the runs: each valid run's ``theta_y - theta_x``
+  against its mean temperature (or time since power-on), weighted by ``1/u^2``
+  with the scale re-estimated from the scatter::
+
+      S_k = A + B (x_k - x_ref)
+
+The regressor is the temperature when every value has one, else the time
+since power-on: the board's sample counter starts at zero at power-up
+(``docs/protocol.md``), so ``seq * dt`` is its uptime (exact until the counter
+wraps, 49.7 days at 1 kHz; a sensor on that long has warmed up).
+
+References
+----------
+.. [1] K. Szipka, A. Archenti, G. W. Vogl, M. A. Donmez, CIRP Annals 68 (2019).
+"""
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from imu_square.errors import AnalysisError
+
+REGRESSORS = ("temperature_c", "time_since_power_on_s")
+# A slope is "significant" below this p-value (two-sided t-test).
+SIGNIFICANCE = 0.05
+
+
+@dataclass(frozen=True)
+class DriftFit:
+    """A first-order regression of ``theta_y - theta_x`` on a drift variable.
+
+    Attributes
+    ----------
+    regressor : str
+        ``"temperature_c"`` [degC] or ``"time_since_power_on_s"`` [s].
+    slope_rad_per_unit : float
+        Fitted slope ``b``. [rad per degC or rad per s]
+    u_slope_rad_per_unit : float
+        Its standard error. [rad per unit]
+    p_value : float
+        Two-sided p-value of ``b = 0``.
+    reference : float
+        ``x_ref``, the value the result is corrected to. [degC or s]
+    value_at_reference_rad : float
+        ``theta_y - theta_x`` at ``x_ref``. [rad]
+    u_value_at_reference_rad : float
+        Its standard error. [rad]
+    uncorrected_rad : float
+        The plain (unregressed) value for comparison: the mean of the CCW/CW
+        pair means within a night, the weighted mean across nights. [rad]
+    u_uncorrected_rad : float
+        Its standard error from the same data. [rad]
+    n : int
+        Observations.
+    dof : int
+        Residual degrees of freedom.
+    """
+
+    regressor: str
+    slope_rad_per_unit: float
+    u_slope_rad_per_unit: float
+    p_value: float
+    reference: float
+    value_at_reference_rad: float
+    u_value_at_reference_rad: float
+    uncorrected_rad: float
+    u_uncorrected_rad: float
+    n: int
+    dof: int
+
+    @property
+    def significant(self):
+        """Whether the slope differs from zero at :data:`SIGNIFICANCE`."""
+        return bool(self.p_value < SIGNIFICANCE)
+
+    def corrected(self, value_rad, x):
+        """A value measured at ``x`` corrected to :attr:`reference`.
+
+        Parameters
+        ----------
+        value_rad : float or ndarray
+            ``theta_y - theta_x`` as measured. [rad]
+        x : float or ndarray
+            The drift variable when it was measured. [degC or s]
+
+        Returns
+        -------
+        float or ndarray
+            ``value - b (x - x_ref)``. [rad]
+        """
+        return value_rad - self.slope_rad_per_unit * (np.asarray(x) - self.reference)
+
+    def to_json_dict(self):
+        """JSON-ready, angles in µrad."""
+        d = asdict(self)
+        for k in (
+            "value_at_reference_rad",
+            "u_value_at_reference_rad",
+            "uncorrected_rad",
+            "u_uncorrected_rad",
+        ):
+            d[k.replace("_rad", "_urad")] = d.pop(k) * 1e6
+        d["slope_urad_per_unit"] = d.pop("slope_rad_per_unit") * 1e6
+        d["u_slope_urad_per_unit"] = d.pop("u_slope_rad_per_unit") * 1e6
+        d["significant"] = self.significant
+        return d
+
+
+def cycle_drift_variable(result, recording):
+    """The drift variable of each cycle of a run: temperature if recorded, else uptime.
+
+    Parameters
+    ----------
+    result : RunResult
+        The run's analysis, with its per-cycle times and temperatures.
+    recording : Recording
+        The recording it came from (for the board's uptime at the first sample).
+
+    Returns
+    -------
+    regressor : str
+        One of :data:`REGRESSORS`.
+    x_ccw, x_cw : ndarray, shape (n_pairs,)
+        The variable over each CCW and each CW cycle. [degC or s]
+    """
+    pc = result.per_cycle
+    t_ccw, t_cw = pc["temperature_ccw_c"], pc["temperature_cw_c"]
+    if np.all(np.isfinite(t_ccw)) and np.all(np.isfinite(t_cw)):
+        return "temperature_c", np.asarray(t_ccw), np.asarray(t_cw)
+    uptime = power_on_offset_s(recording)
+    return "time_since_power_on_s", uptime + pc["t_ccw_s"], uptime + pc["t_cw_s"]
+
+
+def power_on_offset_s(recording):
+    """The board's uptime at a recording's first sample, from its sample counter. [s]
+
+    Parameters
+    ----------
+    recording : Recording
+        The recording.
+
+    Returns
+    -------
+    float
+        ``seq[0] * dt``. [s]
+    """
+    return float(recording.seq[0]) * recording.dt_ns * 1e-9
+
+
+def fit_night_drift(result, recording, reference=None):
+    """Regress one night's per-cycle ``theta_y - theta_x`` on its drift variable.
+
+    Parameters
+    ----------
+    result : RunResult
+        The night's analysis.
+    recording : Recording
+        Its recording.
+    reference : float, optional
+        ``x_ref`` [degC or s]; the night's mean of the variable if None.
+
+    Returns
+    -------
+    DriftFit
+
+    Raises
+    ------
+    AnalysisError
+        Too few cycles, or a drift variable that does not vary.
+    """
+    import statsmodels.api as sm
+
+    regressor, x_ccw, x_cw = cycle_drift_variable(result, recording)
+    pc = result.per_cycle
+    y = np.concatenate([pc["squareness_ccw_rad"], pc["squareness_cw_rad"]])
+    x = np.concatenate([x_ccw, x_cw])
+    d = np.concatenate([np.ones(x_ccw.size), -np.ones(x_cw.size)])
+    x_ref = float(np.mean(x)) if reference is None else float(reference)
+    _check_design(x, y.size, 4, regressor)
+    design = np.column_stack([np.ones_like(x), d, x - x_ref])
+    fit = sm.OLS(y, design).fit()
+    plain = sm.OLS(y, design[:, :2]).fit()
+    return DriftFit(
+        regressor=regressor,
+        slope_rad_per_unit=float(fit.params[2]),
+        u_slope_rad_per_unit=float(fit.bse[2]),
+        p_value=float(fit.pvalues[2]),
+        reference=x_ref,
+        value_at_reference_rad=float(fit.params[0]),
+        u_value_at_reference_rad=float(fit.bse[0]),
+        uncorrected_rad=float(plain.params[0]),
+        u_uncorrected_rad=float(plain.bse[0]),
+        n=int(y.size),
+        dof=int(fit.df_resid),
+    )
+
+
+def fit_run_drift(values_rad, u_rad, x, regressor, reference=None):
+    """Regress runs' ``theta_y - theta_x`` on their drift variable across nights.
+
+    Parameters
+    ----------
+    values_rad : array_like, shape (n_runs,)
+        Each run's ``theta_y - theta_x``. [rad]
+    u_rad : array_like, shape (n_runs,)
+        Their standard uncertainties, for the weights. [rad]
+    x : array_like, shape (n_runs,)
+        Each run's mean drift variable. [degC or s]
+    regressor : str
+        One of :data:`REGRESSORS`.
+    reference : float, optional
+        ``x_ref`` [degC or s]; the runs' mean if None.
+
+    Returns
+    -------
+    DriftFit
+
+    Raises
+    ------
+    AnalysisError
+        Fewer than 3 runs, or a drift variable that does not vary.
+    """
+    import statsmodels.api as sm
+
+    y = np.asarray(values_rad, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    w = 1.0 / np.square(np.asarray(u_rad, dtype=np.float64))
+    x_ref = float(np.mean(x)) if reference is None else float(reference)
+    _check_design(x, y.size, 3, regressor)
+    design = np.column_stack([np.ones_like(x), x - x_ref])
+    fit = sm.WLS(y, design, weights=w).fit()
+    plain = sm.WLS(y, design[:, :1], weights=w).fit()
+    return DriftFit(
+        regressor=regressor,
+        slope_rad_per_unit=float(fit.params[1]),
+        u_slope_rad_per_unit=float(fit.bse[1]),
+        p_value=float(fit.pvalues[1]),
+        reference=x_ref,
+        value_at_reference_rad=float(fit.params[0]),
+        u_value_at_reference_rad=float(fit.bse[0]),
+        uncorrected_rad=float(plain.params[0]),
+        u_uncorrected_rad=float(plain.bse[0]),
+        n=int(y.size),
+        dof=int(fit.df_resid),
+    )
+
+
+def _check_design(x, n, least, regressor):
+    if n < least:
+        raise AnalysisError(
+            f"a drift regression needs at least {least} values, got {n}: too few to fit a slope"
+        )
+    if not np.all(np.isfinite(x)):
+        raise AnalysisError(f"the drift variable {regressor} has missing values")
+    spread = float(np.ptp(x))
+    if not spread > 0 or not math.isfinite(spread):
+        raise AnalysisError(
+            f"the drift variable {regressor} does not vary (all {x[0]:g}): no slope to fit"
+        )
