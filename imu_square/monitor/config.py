@@ -1,0 +1,315 @@
+"""The monitor file (``monitor.toml``): one machine's nightly squareness monitor.
+
+Distinct from the simulator's machine and sensor files. Every field is checked
+like the program file: one line names the field, the value and what is
+allowed. Relative paths are taken from the monitor file's folder. A complete
+file, as ``imu-square init`` writes it::
+
+    [monitor]
+    machine_id = "mill-3"
+    history = ""                 # "" = the per-user default; a path; or postgresql://...
+    data_dir = ""                # recordings, plots, report; "" = beside the history
+
+    [sensor]
+    port = "emulated"            # or /dev/serial/by-id/usb-...; "emulated" = built-in board
+    baud = 921600
+    trigger = "marker"           # "marker" (CNC M-code), "motion" or "immediate"
+    header_timeout_s = 5.0
+
+    [emulated]                   # only with port = "emulated"
+    machine = ""                 # simulator machine file; "" = a typical machine
+    sensor = ""                  # simulator sensor file; "" = the paper's sensor
+    speed = 20.0                 # times faster than real time
+
+    [program]
+    file = ""                    # the circle test's program file; "" = the paper's test
+
+    [analysis]
+    cutoff_hz = 4.0
+    order = 1
+    bootstrap = 200
+
+    [alarms]
+    false_alarm_nights = 730     # accept one false alarm in this many nights
+    step_um_per_m = 10.0         # the change to detect, for the out-of-control run length
+
+    [alerts] ...                 # imu_square.monitor.alert_config
+    [metrics] ...                # imu_square.monitor.metrics
+
+The history's per-user default is :func:`imu_square.monitor.store.default_history_path`.
+"""
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from imu_square.errors import MonitorConfigError
+from imu_square.monitor.alert_config import AlertsConfig, alerts_from_mapping
+from imu_square.monitor.fields import Table
+from imu_square.monitor.metrics import MetricsConfig, metrics_from_mapping
+from imu_square.textfile import read_text
+
+EMULATED = "emulated"
+TRIGGERS = ("marker", "motion", "immediate")
+SECTIONS = (
+    "monitor",
+    "sensor",
+    "emulated",
+    "program",
+    "analysis",
+    "alarms",
+    "alerts",
+    "metrics",
+)
+_MACHINE_ID_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-")
+
+
+@dataclass(frozen=True)
+class SensorLink:
+    """How the nightly job reaches the sensor board.
+
+    Attributes
+    ----------
+    port : str
+        Serial port (a stable name) or a pyserial URL, or ``"emulated"``.
+    baud : int
+        Line speed. [bit/s]
+    trigger : str
+        When recording starts: ``"marker"``, ``"motion"`` or ``"immediate"``.
+    header_timeout_s : float
+        Give up when the board sends no header within this time. [s]
+    """
+
+    port: str = EMULATED
+    baud: int = 921600
+    trigger: str = "marker"
+    header_timeout_s: float = 5.0
+
+    @property
+    def emulated(self):
+        """Whether the built-in emulated board stands in for a real one."""
+        return self.port == EMULATED
+
+
+@dataclass(frozen=True)
+class EmulatedBoard:
+    """The emulated board's simulated machine and sensor.
+
+    Attributes
+    ----------
+    machine, sensor : Path or None
+        Simulator machine and sensor files; None for the built-in ones.
+    speed : float
+        Times faster than real time.
+    """
+
+    machine: Path | None = None
+    sensor: Path | None = None
+    speed: float = 20.0
+
+
+@dataclass(frozen=True)
+class AlarmSettings:
+    """What the user accepts and wants to see; the charts are designed from it.
+
+    Attributes
+    ----------
+    false_alarm_nights : float
+        In-control average run length: one false alarm in this many nights.
+    step_rad : float
+        The change the charts should find quickly (its out-of-control run
+        length is reported). [rad]
+    """
+
+    false_alarm_nights: float = 730.0
+    step_rad: float = 10e-6
+
+
+@dataclass(frozen=True)
+class AnalysisSettings:
+    """The analysis options the monitor stores with every run.
+
+    Attributes
+    ----------
+    cutoff_hz : float
+        Low-pass cutoff. [Hz]
+    order : int
+        Low-pass order.
+    bootstrap : int
+        Bootstrap resamples (0 to skip).
+    """
+
+    cutoff_hz: float = 4.0
+    order: int = 1
+    bootstrap: int = 200
+
+    def options(self):
+        """The pipeline's :class:`~imu_square.pipeline.options.AnalysisOptions`."""
+        from imu_square.pipeline.options import AnalysisOptions
+
+        return AnalysisOptions(
+            cutoff_hz=self.cutoff_hz, order=self.order, bootstrap_n=self.bootstrap
+        )
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """A validated monitor file.
+
+    Attributes
+    ----------
+    path : Path
+        The monitor file.
+    machine_id : str
+        The machine monitored.
+    history : str
+        Where the history is: a SQLite path or a ``postgresql://`` URL; "" for
+        the per-user default.
+    data_dir : Path or None
+        Where nightly recordings, plots and the report go; None for beside the history.
+    sensor : SensorLink
+    emulated : EmulatedBoard
+    program : Path or None
+        The program file; None for the paper's test.
+    analysis : AnalysisSettings
+    alarms : AlarmSettings
+    alerts : AlertsConfig
+    metrics : MetricsConfig or None
+    """
+
+    path: Path
+    machine_id: str
+    history: str = ""
+    data_dir: Path | None = None
+    sensor: SensorLink = field(default_factory=SensorLink)
+    emulated: EmulatedBoard = field(default_factory=EmulatedBoard)
+    program: Path | None = None
+    analysis: AnalysisSettings = field(default_factory=AnalysisSettings)
+    alarms: AlarmSettings = field(default_factory=AlarmSettings)
+    alerts: AlertsConfig = field(default_factory=AlertsConfig)
+    metrics: MetricsConfig | None = None
+
+    def history_location(self):
+        """The history as :func:`~imu_square.monitor.store.open_history` takes it."""
+        from imu_square.monitor.store import default_history_path
+
+        return self.history or str(default_history_path())
+
+    def output_dir(self):
+        """Folder of the nightly recordings, plots and report (created when written)."""
+        if self.data_dir is not None:
+            return self.data_dir
+        from imu_square.monitor.store import default_history_path, is_postgres_url
+
+        location = self.history_location()
+        base = default_history_path().parent if is_postgres_url(location) else Path(location).parent
+        return base / self.machine_id
+
+    def outbox_dir(self):
+        """Folder of alerts not yet delivered."""
+        return self.alerts.outbox or self.output_dir() / "outbox"
+
+
+def monitor_from_mapping(doc, path):
+    """Validate a parsed monitor file.
+
+    Parameters
+    ----------
+    doc : dict
+        The parsed TOML.
+    path : str or Path
+        The file, for messages and for relative paths.
+
+    Returns
+    -------
+    MonitorConfig
+
+    Raises
+    ------
+    MonitorConfigError
+        One line naming the file, the table, the field, what is allowed and what came.
+    """
+    path = Path(path)
+    source, base = str(path), path.parent
+    unknown = sorted(set(doc) - set(SECTIONS))
+    if unknown:
+        raise MonitorConfigError(
+            f"{source}: unknown section [{unknown[0]}]; allowed: {list(SECTIONS)}"
+        )
+    if "monitor" not in doc:
+        raise MonitorConfigError(f"{source}: the [monitor] section with machine_id is missing")
+
+    def table(name, fields):
+        return Table(doc.get(name, {}), f"[{name}]", fields, source, base)
+
+    mon = table("monitor", ("machine_id", "history", "data_dir"))
+    machine_id = mon.text("machine_id")
+    if not set(machine_id) <= _MACHINE_ID_CHARS or len(machine_id) > 64:
+        mon.fail("machine_id", "1-64 letters, digits, '_', '.' or '-'", machine_id)
+    history = mon.text("history", "", empty=True)
+    if history and not history.startswith(("postgresql://", "postgres://")):
+        history = str(mon.path("history"))
+    data_dir = mon.path("data_dir") if mon.text("data_dir", "", empty=True) else None
+
+    sen = table("sensor", ("port", "baud", "trigger", "header_timeout_s"))
+    sensor = SensorLink(
+        port=sen.text("port", EMULATED),
+        baud=sen.integer("baud", 921600, 1, 20_000_000),
+        trigger=sen.choice("trigger", "marker", TRIGGERS),
+        header_timeout_s=sen.number("header_timeout_s", 5.0, 0.0, 600.0, lo_open=True),
+    )
+    emu = table("emulated", ("machine", "sensor", "speed"))
+    emulated = EmulatedBoard(
+        machine=emu.path("machine") if emu.text("machine", "", empty=True) else None,
+        sensor=emu.path("sensor") if emu.text("sensor", "", empty=True) else None,
+        speed=emu.number("speed", 20.0, 0.0, 1000.0, lo_open=True),
+    )
+    prog = table("program", ("file",))
+    program = prog.path("file") if prog.text("file", "", empty=True) else None
+    ana = table("analysis", ("cutoff_hz", "order", "bootstrap"))
+    analysis = AnalysisSettings(
+        cutoff_hz=ana.number("cutoff_hz", 4.0, 0.0, 1000.0, lo_open=True),
+        order=ana.integer("order", 1, 1, 8),
+        bootstrap=ana.integer("bootstrap", 200, 0, 10_000),
+    )
+    alarm = table("alarms", ("false_alarm_nights", "step_um_per_m"))
+    alarms = AlarmSettings(
+        false_alarm_nights=alarm.number("false_alarm_nights", 730.0, 10.0, 1e6),
+        step_rad=alarm.number("step_um_per_m", 10.0, 0.0, 1e4, lo_open=True) * 1e-6,
+    )
+    metrics = None
+    if "metrics" in doc:
+        metrics = metrics_from_mapping(doc["metrics"], source, base)
+    return MonitorConfig(
+        path=path,
+        machine_id=machine_id,
+        history=history,
+        data_dir=data_dir,
+        sensor=sensor,
+        emulated=emulated,
+        program=program,
+        analysis=analysis,
+        alarms=alarms,
+        alerts=alerts_from_mapping(doc.get("alerts"), source, base),
+        metrics=metrics,
+    )
+
+
+def read_monitor(path):
+    """Read and validate a monitor file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The monitor file.
+
+    Returns
+    -------
+    MonitorConfig
+    """
+    text = read_text(path, MonitorConfigError)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MonitorConfigError(f"{path}: not valid TOML: {exc}") from None
+    return monitor_from_mapping(doc, path)
