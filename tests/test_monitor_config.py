@@ -61,5 +61,5 @@ def test_mistakes_are_one_line_naming_file_field_and_value(tmp_path, text, messa
 
 
 def test_missing_file(tmp_path):
-    with pytest.raises(MonitorConfigError, match="nowhere.toml"):
+    with pytest.raises(MonitorConfigError, match=r"nowhere\.toml"):
         read_monitor(tmp_path / "nowhere.toml")
