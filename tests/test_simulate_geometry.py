@@ -122,5 +122,5 @@ def test_apply_position_matches_deviation():
 
 
 def test_chapman_machine_number_is_checked():
-    with pytest.raises(ValueError, match=r"must be one of \(1, 2, 3, 4, 5\), got 6"):
-        chapman_machine(6)
+    with pytest.raises(ValueError, match=r"must be one of \(1, 2, 3, 4, 5, 6, 7\), got 8"):
+        chapman_machine(8)

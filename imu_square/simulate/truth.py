@@ -13,10 +13,13 @@ Keys:
   a machine without straightness errors or gravity coupling, see
   ``expected_theta_diff_rad``;
 - ``local_squareness_rad``: the squareness a ballbar sees on this circle,
-  from the geometry alone (straightness/yaw included, sensor excluded);
-- ``expected_theta_diff_rad = local_squareness + beta + gravity_phase``:
+  from the geometry alone (straightness/yaw included, sensor excluded): the
+  error map's Jacobian at the centre, exact for a quadratic map;
+- ``expected_theta_diff_rad = circle_squareness + beta + gravity_phase``:
   what ``theta_y - theta_x`` (mean of CCW and flipped CW) should give on
-  this run, to first order in every error;
+  this run, to first order in every error; ``circle_squareness``
+  (:meth:`Geometry.circle_squareness`) is the local squareness plus the
+  harmonics of a quartic X form (Chapman's machine 7), zero otherwise;
 - ``expected_theta_diff_exact_rad``: the same without the first-order
   approximation in the sensor rotation: the local Jacobian ``J`` of the
   error map and the gravity coupling ``K`` act on the commanded acceleration
@@ -57,11 +60,16 @@ def _gravity_phases(program, machine):
     return theta_x, theta_y
 
 
-def _exact_theta_diff(program, machine, alpha_beta_t, eps):
-    """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``."""
+def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics):
+    """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``.
+
+    ``harmonics`` (circle minus local squareness) enters as a shear, as the
+    squareness does.
+    """
     beta, t_mean = alpha_beta_t
     cx, cy = program.centre_m
     jxx, jxy, jyx, jyy = (float(v) for v in machine.geometry.jacobian(cx, cy, t_mean))
+    jxy -= harmonics
     kxx, kxy, kyx, kyy = machine.tilt_per_m
     q = G * program.radius_m / program.centripetal_m_s2
     m = np.array([[1.0 + jxx - q * kxx, jxy - q * kxy], [jyx - q * kyx, 1.0 + jyy - q * kyy]])
@@ -130,15 +138,16 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
         times, _, _ = timeline.reversals(axis)
         reversals[name] = [(t + tau) * clock_factor for t in times]
     local = float(geometry.local_squareness(cx, cy, t_mean)) + 0.0
+    circle = float(geometry.circle_squareness(cx, cy, program.radius_m, t_mean)) + 0.0
     yaw = float(geometry.carriage_yaw(cx, cy))
     return {
         "alpha_rad": alpha,
         "beta_rad": beta,
         "squareness_rad": alpha + beta,
         "local_squareness_rad": local,
-        "expected_theta_diff_rad": local + beta + theta_gy - theta_gx,
+        "expected_theta_diff_rad": circle + beta + theta_gy - theta_gx,
         "expected_theta_diff_exact_rad": _exact_theta_diff(
-            program, machine, (beta, t_mean), sensor.eps_c_rad + yaw
+            program, machine, (beta, t_mean), sensor.eps_c_rad + yaw, circle - local
         )
         + 0.0,
         "eps_c_rad": sensor.eps_c_rad,
