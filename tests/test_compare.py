@@ -337,3 +337,11 @@ def test_imu_mean_agrees_with_the_ballbar_mean(acceptance_rows):
             assert abs(gap) < 3 * u, (n, gap)
             checked += 1
     assert checked >= 2  # machine 6, three and four circles
+
+
+def test_a_circle_the_pipeline_refuses_names_its_location():
+    # a sensor turned 45 deg hides the machine's squareness: the pipeline refuses
+    sensor = replace(read_sensor(data_path("sensor_paper.toml")), eps_c_rad=math.radians(45))
+    machine = MachineModel(geometry=chapman_machine(1))
+    with pytest.raises(ImuSquareError, match=r"^IMU circle at \(0, 0\) mm: the sensor is turned"):
+        compare_methods(machine, [(0.0, 0.0)], 0.1, sensor=sensor)

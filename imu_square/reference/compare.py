@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from imu_square.errors import ImuSquareError, check_option
+from imu_square.errors import AnalysisError, ImuSquareError, check_option
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import read_program
 from imu_square.program.spec import program_from_mapping
@@ -371,7 +371,7 @@ def _local_note(g, centre, alpha):
 def _ballbar_rows(machine, centres, radius_m, alpha):
     g = machine.geometry
     lash = (machine.backlash_x_m, machine.backlash_y_m)
-    rows, full, arcs = [], [], []
+    rows, full = [], []
     for arc in (360.0, ARC_DEG):
         values = []
         for c in centres:
@@ -408,7 +408,8 @@ def _ballbar_rows(machine, centres, radius_m, alpha):
                     details={"local_squareness_rad": local},
                 )
             )
-        (full if arc == 360.0 else arcs).extend(values)
+        if arc == 360.0:
+            full = values
         if len(centres) > 1:
             mean = float(np.mean(values))
             turns = float(np.mean(full)) - alpha
@@ -493,7 +494,10 @@ def _biaxial_rows(g, x_range, y_range, alpha, reference_line, suffix=""):
 def _imu_row(machine, sensor, program, centre, radius_m, seed, options, ballbar_rad):
     g = machine.geometry
     recording, truth = simulate_run(program, machine, sensor, seed=seed)
-    result = analyze(recording, options)
+    try:
+        result = analyze(recording, options)
+    except AnalysisError as exc:
+        raise AnalysisError(f"IMU circle at {_mm(centre)} mm: {exc}") from None
     cos2 = math.cos(2 * result.eps_c_rad)
     beta = truth["beta_rad"]
     value = result.squareness_rad - beta / cos2
@@ -525,8 +529,8 @@ def _imu_row(machine, sensor, program, centre, radius_m, seed, options, ballbar_
     note += f" ({', '.join(parts)})" if parts else " (same local squareness)"
     if abs(value - value_ols) > 2 * u:
         note += (
-            f"; the robust fit is {_um(value - value_ols)} from least squares: the trace's "
-            "harmonics are down-weighted as outliers"
+            f"; the robust fit is {_um(value - value_ols)} from least squares: it down-weights "
+            "part of the trace (reversal spikes, or harmonics the sine model lacks)"
         )
     return MethodRow(
         method="imu",
