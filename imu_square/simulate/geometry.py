@@ -39,9 +39,10 @@ Y axis at X position ``x`` and the X axis's straight reference line, given by
 On a circle of radius ``R`` the quartic part of the X form adds terms in
 ``f3 R^2``, with ``f3 = 24 q_x X`` the form's third derivative at the centre,
 which the two instruments see differently because they read different
-harmonics of the same path. The accelerometer's phases see the fundamental of the path (``-f3 R^2 /
-8`` without yaw) and, on a table turned by the carriage's yaw ``f'(X)``, the
-second harmonic of that yaw (``+f3 R^2 / 4`` with yaw):
+harmonics of the same path. The accelerometer's phases see the fundamental of
+the path (``-f3 R^2 / 8`` without yaw) and, on a table turned by the
+carriage's yaw ``f'(X)``, the second harmonic of that yaw (``+f3 R^2 / 4``
+with yaw):
 :meth:`Geometry.circle_squareness`. The ballbar's ``sin 2 phi`` term also
 takes in the third harmonic of the path: ``-f3 R^2 / 12`` without yaw,
 ``+f3 R^2 / 6`` with it (:mod:`imu_square.reference.ballbar`).
@@ -181,26 +182,29 @@ class Geometry:
         X, X1, X2 = x[0] - x0, x[1], x[2]
         Y, Y1, Y2 = y[0] - y0, y[1], y[2]
         # the monomials and their first and second time derivatives
-        X_2, X_3 = X * X, X * X * X
-        mono = (
+        mono = [
             (X, X1, X2),
             (Y, Y1, Y2),
-            (X_2, 2 * X * X1, 2 * (X1 * X1 + X * X2)),
+            (X * X, 2 * X * X1, 2 * (X1 * X1 + X * X2)),
             (X * Y, X1 * Y + X * Y1, X2 * Y + 2 * X1 * Y1 + X * Y2),
             (Y * Y, 2 * Y * Y1, 2 * (Y1 * Y1 + Y * Y2)),
-            (
-                X_3 * Y,
-                3 * X_2 * X1 * Y + X_3 * Y1,
-                6 * X * X1 * X1 * Y + 3 * X_2 * (X2 * Y + 2 * X1 * Y1) + X_3 * Y2,
-            ),
-            (X_3 * X, 4 * X_3 * X1, 12 * X_2 * X1 * X1 + 4 * X_3 * X2),
-        )
+        ]
+        if self.q_x:  # the quartic form's X^3 Y and X^4, only when there is one
+            X_2, X_3 = X * X, X * X * X
+            mono.append(
+                (
+                    X_3 * Y,
+                    3 * X_2 * X1 * Y + X_3 * Y1,
+                    6 * X * X1 * X1 * Y + 3 * X_2 * (X2 * Y + 2 * X1 * Y1) + X_3 * Y2,
+                )
+            )
+            mono.append((X_3 * X, 4 * X_3 * X1, 12 * X_2 * X1 * X1 + 4 * X_3 * X2))
         alpha = self.squareness_at(t)
         rate = self.squareness_rate_rad_s
         out = []
         for base, coeffs in zip((x, y), self._coefficients(), strict=True):
             p = [base[0].copy(), base[1].copy(), base[2].copy()]
-            for c, m in zip(coeffs, mono, strict=True):
+            for c, m in zip(coeffs[: len(mono)], mono, strict=True):
                 if c:
                     for k in range(3):
                         p[k] += c * m[k]
