@@ -116,20 +116,22 @@ def test_no_yaw_every_biaxial_test_gives_15(machine, shape, orientation):
     # machines 1, 2, 4: "the global squareness result is always 15 um/m
     # irrespective of the test method and equipment orientation"
     r = biaxial_squareness(chapman_eq(machine), shape, orientation, HALF, HALF)
-    assert r.squareness_rad == pytest.approx(ALPHA, rel=EXACT)
+    assert r.machine_squareness_rad == pytest.approx(ALPHA, rel=EXACT)
 
 
 @pytest.mark.parametrize("machine", [1, 2, 3, 4, 5])
 def test_ballbar_diagonal_and_plus_give_15_on_every_machine(machine):
     dev = chapman_eq(machine)
     bb = ballbar_squareness(dev, (0.0, 0.0), 0.4)
-    assert bb.squareness_rad == pytest.approx(ALPHA, abs=ballbar_tolerance(dev, (0, 0), 0.4))
-    assert bb.squareness_ccw_rad == bb.squareness_cw_rad
+    assert bb.machine_squareness_rad == pytest.approx(
+        ALPHA, abs=ballbar_tolerance(dev, (0, 0), 0.4)
+    )
+    assert bb.machine_squareness_ccw_rad == bb.machine_squareness_cw_rad
     tol = diagonal_tolerance(dev, HALF, HALF)
     assert diagonal_squareness(dev, HALF, HALF) == pytest.approx(ALPHA, abs=tol)
     for orientation in ORIENTATIONS_DEG:
         r = biaxial_squareness(dev, "+", orientation, HALF, HALF)
-        assert r.squareness_rad == pytest.approx(ALPHA, rel=EXACT)
+        assert r.machine_squareness_rad == pytest.approx(ALPHA, rel=EXACT)
 
 
 def test_machine_3_L_and_T_change_with_orientation_and_average_to_15():
@@ -137,7 +139,7 @@ def test_machine_3_L_and_T_change_with_orientation_and_average_to_15():
     # reference line goes from -35 um/m at the left end of X to +65 at the right.
     dev = chapman_eq(3)
     res = {
-        (s, o): biaxial_squareness(dev, s, o, HALF, HALF).squareness_rad
+        (s, o): biaxial_squareness(dev, s, o, HALF, HALF).machine_squareness_rad
         for s in ("L", "T")
         for o in ORIENTATIONS_DEG
     }
@@ -164,7 +166,10 @@ def test_machine_3_L_and_T_change_with_orientation_and_average_to_15():
 def test_machine_5_opposite_corners_and_sides_average_to_15():
     dev = chapman_eq(5)
     for shape in ("L", "T"):
-        r = [biaxial_squareness(dev, shape, o, HALF, HALF).squareness_rad for o in ORIENTATIONS_DEG]
+        r = [
+            biaxial_squareness(dev, shape, o, HALF, HALF).machine_squareness_rad
+            for o in ORIENTATIONS_DEG
+        ]
         assert max(r) - min(r) > 90e-6  # "changed again": they do vary
         assert (r[0] + r[2]) / 2 == pytest.approx(ALPHA, rel=EXACT)
         assert (r[1] + r[3]) / 2 == pytest.approx(ALPHA, rel=EXACT)
@@ -181,14 +186,14 @@ def local_results(dev, centre):
     xr, yr = (cx - 0.1, cx + 0.1), (cy - 0.1, cy + 0.1)
     out = {
         "ballbar": (
-            ballbar_squareness(dev, centre, 0.1).squareness_rad,
+            ballbar_squareness(dev, centre, 0.1).machine_squareness_rad,
             ballbar_tolerance(dev, centre, 0.1),
         ),
         "diagonal": (diagonal_squareness(dev, xr, yr), diagonal_tolerance(dev, xr, yr)),
     }
     for shape in SHAPES:
         for o in ORIENTATIONS_DEG:
-            value = biaxial_squareness(dev, shape, o, xr, yr).squareness_rad
+            value = biaxial_squareness(dev, shape, o, xr, yr).machine_squareness_rad
             out[shape, o] = (value, EXACT * abs(value) + 1e-18)
     return out
 
@@ -240,7 +245,7 @@ def test_ballbar_sign_of_pure_squareness():
     # second order: R (sqrt(1 - a sin2phi + a^2 sin^2 phi) - 1) - linear <= a^2 R
     assert_allclose(r.deviation_ccw_m, expected, atol=alpha**2 * radius)
     assert r.deviation_ccw_m[45] < 0 < r.deviation_ccw_m[135]
-    assert r.squareness_rad == pytest.approx(alpha, abs=4 * alpha**2)
+    assert r.machine_squareness_rad == pytest.approx(alpha, abs=4 * alpha**2)
 
 
 def test_ballbar_scale_mismatch_backlash_and_offset():
@@ -253,7 +258,7 @@ def test_ballbar_scale_mismatch_backlash_and_offset():
     lashed = ballbar_squareness(dev, (0.0, 0.0), 0.1, backlash=(4e-6, 6e-6))
     tol = ballbar_tolerance(dev, (0.0, 0.0), 0.1)
     for r in (clean, lashed):
-        assert r.squareness_rad == pytest.approx(alpha, abs=tol)
+        assert r.machine_squareness_rad == pytest.approx(alpha, abs=tol)
         assert r.scale_mismatch == pytest.approx(sx - sy, abs=tol)
         # the pivot was set by the same machine: a constant offset cancels
         assert r.centre_offset_m == pytest.approx((0.0, 0.0), abs=1e-15)
@@ -261,9 +266,9 @@ def test_ballbar_scale_mismatch_backlash_and_offset():
     # is free of it. Sampling the steps at n points: relative error ~ 1/(2n).
     assert np.max(np.abs(lashed.deviation_ccw_m - lashed.deviation_cw_m)) > 3e-6
     bias = -8 * (4e-6 - 6e-6) / (3 * np.pi * 0.1)
-    assert lashed.squareness_ccw_rad - alpha == pytest.approx(bias, rel=1 / 3600)
-    assert lashed.squareness_cw_rad - alpha == pytest.approx(-bias, rel=1 / 3600)
-    assert clean.squareness_ccw_rad == pytest.approx(alpha, abs=tol)
+    assert lashed.machine_squareness_ccw_rad - alpha == pytest.approx(bias, rel=1 / 3600)
+    assert lashed.machine_squareness_cw_rad - alpha == pytest.approx(-bias, rel=1 / 3600)
+    assert clean.machine_squareness_ccw_rad == pytest.approx(alpha, abs=tol)
     # clean: only the second-order part of the length is left (bound M = tol R / 4)
     assert clean.residual_rms_m < tol * 0.1 / 4 < 1e-7 < lashed.residual_rms_m
 
@@ -405,7 +410,7 @@ def test_instrument_rotation_cancels():
     b = biaxial_squareness(dev, "L", 90, HALF, HALF, instrument_rotation_rad=1e-3)
     # the readings tilt by 1 mrad, the difference of slopes does not (to second order)
     assert b.slope_x_rad == pytest.approx(a.slope_x_rad - 1e-3, rel=1e-3)
-    assert b.squareness_rad == pytest.approx(a.squareness_rad, abs=1e-3 * 1e-4)
+    assert b.machine_squareness_rad == pytest.approx(a.machine_squareness_rad, abs=1e-3 * 1e-4)
 
 
 # ---- CLI ----------------------------------------------------------------------
@@ -419,9 +424,13 @@ def test_cli_reference_machine_3(tmp_path, capsys):
     )
     assert main(["reference", "--machine", str(path), "--json"]) == 0
     captured = capsys.readouterr()
-    out = json.loads(captured.out)["methods"]
-    assert out["ballbar"]["squareness_rad"] == pytest.approx(15e-6, rel=1e-6)
-    assert out["diagonal"]["squareness_rad"] == pytest.approx(15e-6, rel=1e-6)
+    doc = json.loads(captured.out)
+    assert doc["reference_line"] == "least_squares"
+    out = doc["methods"]
+    for method in ("ballbar", "diagonal"):
+        assert out[method]["machine_squareness_rad"] == pytest.approx(15e-6, rel=1e-6)
+        # the old key stays for one release, with the same value
+        assert out[method]["squareness_rad"] == out[method]["machine_squareness_rad"]
     assert out["L"] == pytest.approx(
         {"0deg": -35e-6, "90deg": -35e-6, "180deg": 65e-6, "270deg": 65e-6}, rel=1e-9
     )
@@ -429,7 +438,26 @@ def test_cli_reference_machine_3(tmp_path, capsys):
     assert "diagonal     15.000" in captured.err
     assert main(["reference", "--machine", str(path), "--method", "T"]) == 0
     err = capsys.readouterr().err
-    assert "90deg    65.000" in err and "ballbar" not in err
+    assert "90deg    65.000" in err and "ballbar" not in err and "µm/m" in err
+
+
+def test_cli_reference_line_option(tmp_path, capsys):
+    # a machine file's forms are symmetric about the middle of the travel, so
+    # the global tests read the same with every reference line (compare --local
+    # shows where they differ)
+    path = tmp_path / "m7.toml"
+    path.write_text(
+        "[geometry]\nmachine_squareness_um_per_m = 15.0\naxis_length_mm = [750.0, 250.0]\n"
+        "[straightness_yaw]\nx_um = 32.14\nx_quartic_um = -25.82\ny_um = 5.0\n"
+    )
+    for line in ("least_squares", "end_point", "minimum_zone"):
+        args = ["reference", "--machine", str(path), "--method", "L", "--json"]
+        assert main([*args, "--reference-line", line]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        assert doc["reference_line"] == line
+        assert doc["methods"]["L"]["0deg"] == pytest.approx(15e-6, rel=1e-9)
+    with pytest.raises(SystemExit):
+        main(["reference", "--machine", str(path), "--reference-line", "lsq"])
 
 
 def test_cli_reference_bad_radius(tmp_path, capsys):

@@ -131,6 +131,6 @@ def test_apply_position_matches_deviation():
 
 def test_chapman_machine_number_is_checked():
     with pytest.raises(
-        ConfigError, match=r"chapman_machine n must be one of \(1, 2, 3, 4, 5\), got 6"
+        ConfigError, match=r"chapman_machine n must be one of \(1, 2, 3, 4, 5, 6, 7\), got 8"
     ):
-        chapman_machine(6)
+        chapman_machine(8)

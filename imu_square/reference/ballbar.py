@@ -24,6 +24,26 @@ in its direction of motion) adds ``s (b_x / 2) cos(phi) sign(sin phi) - s (b_y
 (3 pi R)``. The bias flips with the direction, so the mean of the CCW and CW
 runs, which is what the test reports, is free of it.
 
+Partial arcs. Renishaw's software estimates squareness from arcs down to
+220 deg [2]_, so that a ballbar can test a machine whose axes differ in length:
+a 220 deg arc symmetric about +Y spans ``2 R`` by ``R (1 + sin 20 deg)``, an
+aspect ratio of 1.49, "approaching 1.5 : 1". The same five-term least-squares
+fit is made over the arc's samples. Over a full circle the trace's higher
+harmonics are orthogonal to the five terms; over an arc they are not. A bow's
+quadratic terms give the trace third harmonics: an X bow's (``sin phi cos^2
+phi``) are even about the arc's axis +Y, orthogonal to ``sin 2 phi``, while a
+Y bow's (``cos phi sin^2 phi``) are odd like it and shift the arc's result.
+
+Non-quadratic maps. The ``sin(2 phi)`` coefficient also takes in the third
+harmonic of the path: with ``dx`` and ``dy`` expanded in harmonics of ``phi``,
+``b2 = (b1 + c1) / 2 + (b3 - c3) / 2``, where ``b_k`` is the ``sin(k phi)``
+coefficient of ``dx`` and ``c_k`` the ``cos(k phi)`` coefficient of ``dy``. An
+accelerometer's phases see only ``b1 + c1``. For an X form with a quartic
+part (Chapman's machine 7, :mod:`imu_square.simulate.geometry`; ``f3`` its
+third derivative at the centre) the ballbar therefore reads ``f3 R^2 / 6``
+(with yaw) or ``-f3 R^2 / 12`` (without) away from the local squareness; a
+symmetric set of circles averages it out.
+
 References
 ----------
 .. [1] ISO 230-4:2005, Test code for machine tools - Part 4: Circular tests
@@ -45,10 +65,12 @@ class BallbarResult:
 
     Attributes
     ----------
-    squareness_rad : float
+    machine_squareness_rad : float
         Mean of the CCW and CW squareness, Chapman's sign. [rad]
-    squareness_ccw_rad, squareness_cw_rad : float
+    machine_squareness_ccw_rad, machine_squareness_cw_rad : float
         Squareness from each direction alone. [rad]
+    arc_deg : float
+        Angle of the arc run: 360 for a full circle. [deg]
     centre_offset_m : tuple of float
         Fitted offset of the circle centre (x, y), mean of both directions. [m]
     radius_change_m : float
@@ -63,9 +85,10 @@ class BallbarResult:
         RMS of what the five-term model leaves, both runs. [m]
     """
 
-    squareness_rad: float
-    squareness_ccw_rad: float
-    squareness_cw_rad: float
+    machine_squareness_rad: float
+    machine_squareness_ccw_rad: float
+    machine_squareness_cw_rad: float
+    arc_deg: float
     centre_offset_m: tuple
     radius_change_m: float
     scale_mismatch: float
@@ -95,8 +118,10 @@ def _design(phi):
     )
 
 
-def ballbar_squareness(deviation, centre, radius, n=3600, backlash=(0.0, 0.0)):
-    """Simulate a ballbar circle (CCW and CW) and fit squareness.
+def ballbar_squareness(
+    deviation, centre, radius, n=3600, backlash=(0.0, 0.0), arc_deg=360.0, arc_start_deg=None
+):
+    """Simulate a ballbar circle or arc (CCW and CW) and fit squareness.
 
     Parameters
     ----------
@@ -108,9 +133,17 @@ def ballbar_squareness(deviation, centre, radius, n=3600, backlash=(0.0, 0.0)):
     radius : float
         Ballbar length. [m]
     n : int
-        Samples per revolution, equispaced in angle.
+        Samples over the circle or arc, equispaced in angle (an arc's two
+        ends included).
     backlash : tuple of float
         Lost motion of the X and Y axes. [m]
+    arc_deg : float
+        Angle of the arc, 220 to 360 (Renishaw's software analyses arcs down
+        to 220 deg). [deg]
+    arc_start_deg : float, optional
+        Position angle where the arc starts; by default 0 for a full circle
+        and ``90 - arc_deg / 2`` for an arc (symmetric about +Y: -20 to 200
+        deg for 220 deg). [deg]
 
     Returns
     -------
@@ -119,13 +152,21 @@ def ballbar_squareness(deviation, centre, radius, n=3600, backlash=(0.0, 0.0)):
     Raises
     ------
     ImuSquareError
-        If ``radius`` is not positive or ``n`` is below 16.
+        If ``radius`` is not positive, ``n`` is below 16 or ``arc_deg`` is
+        outside [220, 360].
     """
     if not radius > 0:
         raise ImuSquareError(f"ballbar radius must be > 0 m, got {radius!r}")
     if not (isinstance(n, int | np.integer) and n >= 16):
         raise ImuSquareError(f"ballbar samples n must be an integer >= 16, got {n!r}")
-    phi = 2 * np.pi * np.arange(n) / n
+    if not 220.0 <= arc_deg <= 360.0:
+        raise ImuSquareError(f"ballbar arc_deg must be in [220, 360], got {arc_deg!r}")
+    if arc_deg == 360.0:
+        start = 0.0 if arc_start_deg is None else arc_start_deg
+        phi = np.radians(start) + 2 * np.pi * np.arange(n) / n
+    else:
+        start = 90.0 - arc_deg / 2 if arc_start_deg is None else arc_start_deg
+        phi = np.radians(start + arc_deg * np.arange(n) / (n - 1))
     design = _design(phi)
     traces, coefs = [], []
     for direction in (1, -1):
@@ -137,9 +178,10 @@ def ballbar_squareness(deviation, centre, radius, n=3600, backlash=(0.0, 0.0)):
     mean = 0.5 * (coefs[0] + coefs[1])
     resid = np.concatenate([t - design @ c for t, c in zip(traces, coefs, strict=True)])
     return BallbarResult(
-        squareness_rad=float(0.5 * (ccw + cw)),
-        squareness_ccw_rad=float(ccw),
-        squareness_cw_rad=float(cw),
+        machine_squareness_rad=float(0.5 * (ccw + cw)),
+        machine_squareness_ccw_rad=float(ccw),
+        machine_squareness_cw_rad=float(cw),
+        arc_deg=float(arc_deg),
         centre_offset_m=(float(mean[1]), float(mean[2])),
         radius_change_m=float(mean[0]),
         scale_mismatch=float(2 * mean[3] / radius),

@@ -8,10 +8,12 @@ deviation perpendicular to the arm, in the instrument's own frame [1]_.
 Instrument frame. Arm ``k`` has unit direction ``a_k`` and normal ``n_k =
 R(+90 deg) a_k``; at commanded point ``p`` the reading is ``n_k . (p + d(p) -
 o_k)`` against the arm position ``s = a_k . (p - o_k)``, with ``o_k`` the arm's
-origin. The least-squares slope ``m_k`` of the reading is the angle by which
-the machine's motion along that arm is turned counter-clockwise from the arm;
-a line's turn does not depend on which way along it ``a_k`` points. Hence,
-with ``m_X`` and ``m_Y`` the slopes of the arms along X and Y,
+origin. The slope ``m_k`` of the reading's reference line (least squares by
+default, as in Chapman's paper; end-point or minimum-zone on request, see
+:mod:`imu_square.reference.lines`) is the angle by which the machine's motion
+along that arm is turned counter-clockwise from the arm; a line's turn does
+not depend on which way along it ``a_k`` points. Hence, with ``m_X`` and
+``m_Y`` the slopes of the arms along X and Y,
 
     squareness = m_Y - m_X
 
@@ -38,6 +40,18 @@ Chapman [1]_: with yaw-induced distortion, L and T results vary with
 orientation while "+" agrees with ballbar and diagonal; averaging L or T
 results from opposite corners or sides agrees with them too.
 
+With associated yaw on both axes (``dx = -y (alpha + f'(x)) + g(y)``, ``dy =
+f(x) - x g'(y)`` for symmetric forms ``f``, ``g``) the result is ``alpha +
+f'(x_Y) + g'(y_X)``: the two axes' yaw where the arms run, at ``x_Y`` (the Y
+arm's X position) and ``y_X`` (the X arm's Y position). That is how machine 7
+with yaw reads 95 um/m in T at 0 deg (``g'`` at the top edge, 80 um/m) while
+"+" (both arms through the middle, where ``f' = g' = 0``) reads 15.
+
+The three reference lines give the same slope for a symmetric form; they
+differ when the form is not, e.g. ``dy = c x^3`` over ``[-h, h]``: least
+squares ``0.6 c h^2``, minimum zone ``0.75 c h^2`` (``x^3 - 3x/4`` is a
+Chebyshev polynomial: it equioscillates), end point ``c h^2``.
+
 References
 ----------
 .. [1] M. A. V. Chapman, "Calibration of machine squareness", Renishaw white
@@ -49,6 +63,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from imu_square.errors import ImuSquareError, check_option
+from imu_square.reference.lines import REFERENCE_LINES
+from imu_square.reference.lines import reference_line as reference_line_fit
 
 SHAPES = ("L", "T", "+")
 ORIENTATIONS_DEG = (0, 90, 180, 270)
@@ -60,7 +76,7 @@ class BiaxialResult:
 
     Attributes
     ----------
-    squareness_rad : float
+    machine_squareness_rad : float
         ``m_Y - m_X``, Chapman's sign. [rad]
     shape : str
         ``"L"``, ``"T"`` or ``"+"``.
@@ -71,19 +87,27 @@ class BiaxialResult:
     y_line_x_m : float
         X position of the arm along which Y moves. [m]
     slope_x_rad, slope_y_rad : float
-        Least-squares slopes ``m_X``, ``m_Y`` of the two straightness traces
-        in the instrument frame. [rad]
+        Slopes ``m_X``, ``m_Y`` of the reference lines of the two straightness
+        traces in the instrument frame. [rad]
+    reference_line : str
+        The reference line used for both traces (one of ``REFERENCE_LINES``).
+    straightness_x_m, straightness_y_m : float
+        Straightness deviation of each trace about its reference line
+        (largest minus smallest deviation). [m]
     position_x_m, reading_x_m, position_y_m, reading_y_m : ndarray
         The two traces: arm position and straightness reading. [m]
     """
 
-    squareness_rad: float
+    machine_squareness_rad: float
     shape: str
     orientation_deg: int
     x_line_y_m: float
     y_line_x_m: float
     slope_x_rad: float
     slope_y_rad: float
+    reference_line: str
+    straightness_x_m: float
+    straightness_y_m: float
     position_x_m: np.ndarray
     reading_x_m: np.ndarray
     position_y_m: np.ndarray
@@ -113,12 +137,6 @@ def _layout(shape, orientation, x_range, y_range):
     return (ym, sense), (at, sense)
 
 
-def _slope(s, reading):
-    design = np.column_stack([np.ones_like(s), s])
-    coef, *_ = np.linalg.lstsq(design, reading, rcond=None)
-    return float(coef[1])
-
-
 def _rot90(v):
     return np.array([-v[1], v[0]])
 
@@ -131,6 +149,7 @@ def biaxial_squareness(
     y_range=(-0.4, 0.4),
     n=81,
     instrument_rotation_rad=0.0,
+    reference_line="least_squares",
 ):
     """Simulate an L, T or + bi-axial straightness test and compute squareness.
 
@@ -150,6 +169,9 @@ def biaxial_squareness(
     instrument_rotation_rad : float
         Misalignment of the whole instrument on the table (counter-clockwise);
         it cancels from the result. [rad]
+    reference_line : {"least_squares", "end_point", "minimum_zone"}
+        Reference line fitted to both traces (ISO 230-1 allows each; use the
+        same for both, as Chapman advises).
 
     Returns
     -------
@@ -158,12 +180,14 @@ def biaxial_squareness(
     Raises
     ------
     ImuSquareError
-        Unknown shape or orientation, or fewer than 3 readings per arm.
+        Unknown shape, orientation or reference line, or fewer than 3
+        readings per arm.
     """
     check_option("shape", shape, SHAPES)
     check_option("orientation_deg", orientation_deg, ORIENTATIONS_DEG)
     if not (isinstance(n, int | np.integer) and n >= 3):
         raise ImuSquareError(f"readings per arm n must be an integer >= 3, got {n!r}")
+    check_option("reference_line", reference_line, REFERENCE_LINES)
     (x_line, sx), (y_line, sy) = _layout(shape, orientation_deg, x_range, y_range)
     c, s_ = np.cos(instrument_rotation_rad), np.sin(instrument_rotation_rad)
     rot = np.array([[c, -s_], [s_, c]])
@@ -184,16 +208,20 @@ def biaxial_squareness(
         actual = pts + np.column_stack([dx, dy])
         position = (pts - origin) @ a
         reading = (actual - origin) @ normal
-        traces.append((position, reading, _slope(position, reading)))
-    (px, rx, mx), (py, ry, my) = traces
+        traces.append((position, reading, reference_line_fit(position, reading, reference_line)))
+    (px, rx, lx), (py, ry, ly) = traces
+    mx, my = lx.slope, ly.slope
     return BiaxialResult(
-        squareness_rad=my - mx,
+        machine_squareness_rad=my - mx,
         shape=shape,
         orientation_deg=orientation_deg,
         x_line_y_m=float(x_line),
         y_line_x_m=float(y_line),
         slope_x_rad=mx,
         slope_y_rad=my,
+        reference_line=reference_line,
+        straightness_x_m=lx.zone_m,
+        straightness_y_m=ly.zone_m,
         position_x_m=px,
         reading_x_m=rx,
         position_y_m=py,

@@ -22,6 +22,7 @@ A machine file (all sections optional; absent = ideal)::
     [straightness_yaw]            # Chapman Appendix I
     x_um = 0.0                    # bow S of the X axis (in Y) at the travel ends
     y_um = 0.0
+    x_quartic_um = 0.0            # quartic part Q (2x/L)^4 of the X form (Chapman's machine 7)
     yaw_x = false                 # with the associated yaw
     yaw_y = false
 
@@ -128,10 +129,11 @@ class MachineModel:
             out["squareness_drift"] = {"rate_rad_s": g.machine_squareness_rate_rad_s}
         if g.scale_x or g.scale_y:
             out["scale_mismatch"] = {"scale_x": g.scale_x, "scale_y": g.scale_y}
-        if g.straightness_x_m or g.straightness_y_m:
+        if g.straightness_x_m or g.straightness_y_m or g.straightness_x_quartic_m:
             out["straightness_yaw"] = {
                 "straightness_x_m": g.straightness_x_m,
                 "straightness_y_m": g.straightness_y_m,
+                "straightness_x_quartic_m": g.straightness_x_quartic_m,
                 "length_x_m": g.length_x_m,
                 "length_y_m": g.length_y_m,
                 "axis_centre_m": list(g.axis_centre_m),
@@ -183,7 +185,13 @@ _LAYOUT = {
     },
     "squareness_drift": {"rate_um_per_m_per_h": 0.0},
     "scale_mismatch": {"x_um_per_m": 0.0, "y_um_per_m": 0.0},
-    "straightness_yaw": {"x_um": 0.0, "y_um": 0.0, "yaw_x": False, "yaw_y": False},
+    "straightness_yaw": {
+        "x_um": 0.0,
+        "y_um": 0.0,
+        "x_quartic_um": 0.0,
+        "yaw_x": False,
+        "yaw_y": False,
+    },
     "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0},
     "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0},
     "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0},
@@ -255,6 +263,7 @@ def machine_from_mapping(doc, source="<machine>"):
         scale_y=s.number("scale_mismatch", "y_um_per_m", UM, -1e4, 1e4),
         straightness_x_m=s.number("straightness_yaw", "x_um", UM, -1e3, 1e3),
         straightness_y_m=s.number("straightness_yaw", "y_um", UM, -1e3, 1e3),
+        straightness_x_quartic_m=s.number("straightness_yaw", "x_quartic_um", UM, -1e3, 1e3),
         length_x_m=lengths[0],
         length_y_m=lengths[1],
         axis_centre_m=s.pair("geometry", "axis_centre_mm", 1e-3),

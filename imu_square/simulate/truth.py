@@ -20,7 +20,9 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   map and the gravity coupling ``K`` act on the commanded acceleration as
   ``M = I + J - (g r / A) K``, the sensor turns it by ``-(eps_c +
   carriage_yaw)`` and leans its y axis by ``beta``, and the thetas are read
-  off exactly (``alpha`` shows as ``alpha cos(2 eps_c)``);
+  off exactly (``alpha`` shows as ``alpha cos(2 eps_c)``); the harmonics of a
+  quartic X form (Chapman's machine 7, :meth:`Geometry.circle_squareness`)
+  enter as a shear, as the squareness does;
 - ``eps_c_rad``: sensor mounting rotation; ``carriage_yaw_rad``: the
   carriage's yaw at the circle centre (associated yaw), which adds to it;
 - ``servo_mismatch_rad = omega (tau_y - tau_x)``;
@@ -69,11 +71,16 @@ def _gravity_phases(program, machine):
     return theta_x, theta_y
 
 
-def _exact_theta_diff(program, machine, alpha_beta_t, eps):
-    """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``."""
+def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics):
+    """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``.
+
+    ``harmonics`` (circle minus local squareness) enters as a shear, as the
+    squareness does.
+    """
     beta, t_mean = alpha_beta_t
     cx, cy = program.centre_m
     jxx, jxy, jyx, jyy = (float(v) for v in machine.geometry.jacobian(cx, cy, t_mean))
+    jxy -= harmonics
     kxx, kxy, kyx, kyy = machine.tilt_per_m
     q = G * program.radius_m / program.centripetal_m_s2
     m = np.array([[1.0 + jxx - q * kxx, jxy - q * kxy], [jyx - q * kyx, 1.0 + jyy - q * kyy]])
@@ -145,8 +152,13 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         times, _, _ = timeline.reversals(axis)
         reversals[name] = [(t + tau) * clock_factor for t in times]
     local = float(geometry.local_machine_squareness(cx, cy, t_mean)) + 0.0
+    circle = float(geometry.circle_squareness(cx, cy, program.radius_m, t_mean)) + 0.0
     yaw = float(geometry.carriage_yaw(cx, cy))
-    expected = _exact_theta_diff(program, machine, (beta, t_mean), sensor.eps_c_rad + yaw) + 0.0
+    harmonics = circle - local
+    expected = _exact_theta_diff(
+        program, machine, (beta, t_mean), sensor.eps_c_rad + yaw, harmonics
+    )
+    expected += 0.0
     return {
         "machine_squareness_rad": alpha,
         "sensor_squareness_rad": beta,
@@ -175,5 +187,5 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         "beta_rad": beta,
         "local_squareness_rad": local,
         "expected_theta_diff_exact_rad": expected,
-        "expected_theta_diff_rad": local + beta + theta_gy - theta_gx,
+        "expected_theta_diff_rad": circle + beta + theta_gy - theta_gx,
     }
