@@ -1,0 +1,1 @@
+"""The monitor: a machine's baseline, its history, thermal drift, designed alarms and alerts."""
