@@ -117,9 +117,11 @@ def main(argv):
                 with history.transaction():
                     _say(f"begin {index}")
                     for i in range(index, index + batch):
-                        run_id, _ = history.add_run(run_for(i))
+                        row = run_for(i)
+                        run_id, _ = history.add_run(row)
+                        state = "no_baseline" if row.valid else "invalid"
                         history.add_evaluation(
-                            EvaluationRow(run_id=run_id, state="no_baseline", statistics={"i": i})
+                            EvaluationRow(run_id=run_id, state=state, statistics={"i": i})
                         )
                         done.append(f"{i}:{run_id}")
                 _say("committed " + " ".join(done))

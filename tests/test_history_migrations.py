@@ -13,8 +13,9 @@ from history_child import MACHINE, run_for
 
 from imu_square.errors import HistoryError
 from imu_square.monitor import schema
+from imu_square.monitor.encoding import canonical_json
 from imu_square.monitor.postgres_backend import PostgresBackend
-from imu_square.monitor.rows import EvaluationRow, canonical_json
+from imu_square.monitor.rows import EvaluationRow
 from imu_square.monitor.sqlite_backend import SqliteBackend
 from imu_square.monitor.store import is_postgres_url, open_history
 

@@ -69,7 +69,7 @@ def test_kill_9_in_the_middle_of_writes_loses_no_committed_run(location):
         time.sleep(rng.uniform(0.0, 0.08))  # a random point of the write loop
         child.kill()
         child.wait()
-        assert child.returncode == -9
+        assert child.returncode == -9, child.stderr.read()
         out = child.stdout.read()
         reported |= _committed(out)
         lines = out.splitlines()

@@ -5,6 +5,7 @@ PostgreSQL server is a throw-away one (``pg_server.py``).
 """
 
 import dataclasses
+import itertools
 import json
 import subprocess
 import sys
@@ -15,20 +16,24 @@ import numpy as np
 import pg_server
 import pytest
 from history_child import MACHINE, SETTINGS, index_of, run_for
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from imu_square.errors import HistoryError, ImuSquareError
 from imu_square.monitor import store
-from imu_square.monitor.rows import (
+from imu_square.monitor.encoding import canonical_json
+from imu_square.monitor.rows import RUN_FLOAT_FIELDS
+from imu_square.monitor.store import (
     AnchorRow,
     BaselineRow,
     EvaluationRow,
-    canonical_json,
     datetime_from_ns,
+    default_history_path,
     file_sha256,
     ns_from_datetime,
+    open_history,
     settings_hash,
 )
-from imu_square.monitor.store import default_history_path, open_history
 
 HOUR_NS = 3600 * 10**9
 
@@ -71,6 +76,50 @@ def test_a_run_reads_back_exactly_as_stored(history):
     assert got.warnings == ("warning of run 5 with µm/m",)
     assert got.settings_hash == settings_hash(SETTINGS)
     assert got.recorded_at == datetime(2026, 9, 21, 14, 13, 20, tzinfo=UTC) + timedelta(hours=5)
+
+
+_ANY_TEXT = st.text(st.characters(exclude_categories=()), max_size=12)  # NUL, surrogates too
+_JSON = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(min_value=-(2**70), max_value=2**70)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | _ANY_TEXT,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(_ANY_TEXT, inner, max_size=4),
+    max_leaves=16,
+)
+_UNIQUE = itertools.count(1_000_000)
+
+
+@settings(
+    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    numbers=st.lists(
+        st.floats(allow_nan=True, allow_infinity=True), min_size=len(RUN_FLOAT_FIELDS)
+    ).map(tuple),
+    blob=_JSON,
+    word=_ANY_TEXT,
+)
+def test_any_numbers_and_json_read_back_bit_for_bit(history, numbers, blob, word):
+    fields = dict(zip(RUN_FLOAT_FIELDS, numbers, strict=False))
+    row = dataclasses.replace(
+        run_for(next(_UNIQUE)),
+        valid=False,
+        invalid_reason="any numbers",
+        result={"blob": blob},
+        quality={word: blob},
+        warnings=[word],
+        **fields,
+    )
+    got = history.run(history.add_run(row)[0])
+    assert got == dataclasses.replace(row, id=got.id)
+    # Floats bit for bit: NaN is None (NULL), -0.0 is 0.0, the rest exactly as given.
+    for name, x in fields.items():
+        want = None if x != x else x + 0.0
+        assert repr(getattr(got, name)) == repr(want), name
+    assert canonical_json(got.result) == canonical_json({"blob": blob})
+    assert got.warnings == (word,)
 
 
 def test_analysed_at_is_stamped_when_not_given(history):
@@ -291,6 +340,8 @@ def test_a_verdict_per_run_and_baseline_replaced_on_re_evaluation(history):
     other = history.add_run(run_for(8, machine="lathe-2"))[0]
     with pytest.raises(HistoryError, match="of machine 'lathe-2' but baseline"):
         history.add_evaluation(EvaluationRow(run_id=other, baseline_id=base, state="ok"))
+    with pytest.raises(HistoryError, match="must be 'invalid' for the invalid run"):
+        history.add_evaluation(EvaluationRow(run_id=ids[3], baseline_id=base, state="ok"))
     with pytest.raises(HistoryError, match="no run 555"):
         history.add_evaluation(EvaluationRow(run_id=555, state="no_baseline"))
     with pytest.raises(ImuSquareError, match="state must be one of"):
@@ -509,6 +560,10 @@ def test_rows_refuse_what_cannot_be_stored():
         _baseline([])
     with pytest.raises(HistoryError, match="stale_reason must say why"):
         _baseline([1], stale=True)
+    with pytest.raises(HistoryError, match=r"RunRow.recording_path must be UTF-8 text"):
+        dataclasses.replace(good, recording_path="/data/r\udcff.mcap")  # undecodable name
+    with pytest.raises(HistoryError, match=r"BaselineRow.note must not hold a NUL character"):
+        _baseline([1], note="a\x00b")
     invalid = dataclasses.replace(good, valid=False, invalid_reason="  bad\n file \t end ")
     assert invalid.invalid_reason == "bad file end"
 
@@ -527,3 +582,17 @@ def test_settings_hash_and_file_hash(tmp_path):
         file_sha256(tmp_path / "missing.mcap")
     assert json.loads(canonical_json({"x": float("inf")})) == {"x": None}
     assert Path(str(f)).exists()
+
+
+def test_sqlite_runs_in_wal_with_full_sync_foreign_keys_and_a_busy_timeout(tmp_path):
+    with open_history(tmp_path / "h.db", busy_timeout_s=12.5) as h:
+        q = h._db.query
+        assert q("PRAGMA journal_mode") == [("wal",)]
+        assert q("PRAGMA synchronous") == [(2,)]  # FULL
+        assert q("PRAGMA foreign_keys") == [(1,)]
+        assert q("PRAGMA busy_timeout") == [(12500,)]
+        h.add_run(run_for(1))
+        # No transaction is left open behind the caller's back: the run is committed.
+        assert not h._db.conn.in_transaction
+        with pytest.raises(HistoryError, match="FOREIGN KEY constraint failed"):
+            h._db.execute("INSERT INTO baseline_runs (baseline_id, run_id) VALUES (7, 7)")

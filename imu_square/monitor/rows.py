@@ -4,31 +4,28 @@ The rows are frozen dataclasses, checked and normalised when they are built,
 so that a row reads back from either backend exactly as it was stored:
 
 - times are integer nanoseconds since the Unix epoch, UTC (fields ``*_ns``),
-  like the times in MCAP; :func:`ns_from_datetime` and :func:`datetime_from_ns`
-  convert;
+  like the times in MCAP (:mod:`imu_square.monitor.encoding` converts);
 - a float field holds a Python float or None (NULL); NaN becomes None, since
-  SQLite stores NaN as NULL anyway;
+  SQLite stores NaN as NULL anyway, and -0.0 becomes 0.0;
+- text fields are UTF-8 without NUL (PostgreSQL's text refuses NUL);
 - the JSON fields (``settings``, ``quality``, ``warnings``, ``per_cycle``,
   ``result``, ``input``, ``statistics``) hold JSON values only: numpy arrays
   become lists, numpy scalars Python numbers, non-finite floats None, tuples
   lists and keys text. They are stored as canonical JSON text
-  (:func:`canonical_json`), byte-identical whichever backend or process wrote
-  them. Treat them as read-only.
+  (:func:`~imu_square.monitor.encoding.canonical_json`), byte-identical
+  whichever backend or process wrote them. Treat them as read-only.
 
 A field ``id`` or ``created_at_ns`` left None is filled in by the store.
 """
 
-import hashlib
-import json
 import math
 import os
 import re
-from collections.abc import Mapping
 from dataclasses import dataclass, field
-from datetime import UTC, datetime, timedelta
 
 from imu_square import __version__
-from imu_square.errors import HistoryError, RecordingError, check_option
+from imu_square.errors import HistoryError, check_option
+from imu_square.monitor.encoding import datetime_from_ns, json_native, settings_hash
 
 #: The monitor's verdicts on a run (issue 11, section 5).
 EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
@@ -36,152 +33,6 @@ EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_
 ANCHOR_METHODS = ("ballbar", "diagonals")
 
 _SHA256 = re.compile(r"[0-9a-f]{64}")
-_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
-
-
-def canonical_json(value, name="value"):
-    """The canonical JSON text of ``value``: sorted keys, no spaces, finite numbers.
-
-    Parameters
-    ----------
-    value : object
-        Dicts, lists, tuples, text, numbers, booleans, None, numpy arrays and
-        scalars. Non-finite floats are written as null.
-    name : str
-        What ``value`` is, for the error message.
-
-    Returns
-    -------
-    str
-        The JSON text; equal values give equal text.
-    """
-    return json.dumps(
-        json_native(value, name),
-        sort_keys=True,
-        separators=(",", ":"),
-        ensure_ascii=False,
-        allow_nan=False,
-    )
-
-
-def json_native(value, name="value"):
-    """``value`` with only JSON-native types: what it reads back as from the history.
-
-    Parameters
-    ----------
-    value : object
-        See :func:`canonical_json`.
-    name : str
-        What ``value`` is, for the error message.
-
-    Returns
-    -------
-    object
-        Dicts with text keys, lists, text, int, finite float, bool or None.
-    """
-    if value is None or isinstance(value, str | bool):
-        return value
-    if isinstance(value, int):
-        return int(value)
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, Mapping):
-        return {str(k): json_native(v, name) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_native(v, name) for v in value]
-    if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy array or scalar
-        return json_native(value.tolist(), name)
-    raise HistoryError(
-        f"{name} must hold JSON values (dicts, lists, text, numbers), "
-        f"got a {type(value).__name__}: {value!r}"
-    )
-
-
-def settings_hash(settings):
-    """SHA-256 of the analysis settings' canonical JSON: the runs' settings key.
-
-    Parameters
-    ----------
-    settings : dict
-        The analysis settings, as JSON values (see :func:`canonical_json`).
-
-    Returns
-    -------
-    str
-        64 lower-case hexadecimal digits.
-    """
-    return hashlib.sha256(canonical_json(settings, "settings").encode("utf-8")).hexdigest()
-
-
-def file_sha256(path):
-    """SHA-256 of a recording's bytes: the runs' recording key.
-
-    Parameters
-    ----------
-    path : str or Path
-        The recording.
-
-    Returns
-    -------
-    str
-        64 lower-case hexadecimal digits.
-    """
-    digest = hashlib.sha256()
-    try:
-        with open(path, "rb") as f:
-            while chunk := f.read(1 << 20):
-                digest.update(chunk)
-    except OSError as exc:
-        raise RecordingError(f"{path}: cannot read the recording: {exc.strerror}") from None
-    return digest.hexdigest()
-
-
-def ns_from_datetime(when):
-    """Integer nanoseconds since the Unix epoch of an aware datetime.
-
-    Parameters
-    ----------
-    when : datetime
-        A time with its time zone.
-
-    Returns
-    -------
-    int
-        Nanoseconds since 1970-01-01T00:00:00Z. [ns]
-    """
-    if not isinstance(when, datetime) or when.utcoffset() is None:
-        raise HistoryError(f"a time must be a datetime with its time zone, got {when!r}")
-    delta = when - _EPOCH
-    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
-
-
-def datetime_from_ns(ns):
-    """The UTC datetime of integer nanoseconds since the Unix epoch (to the microsecond).
-
-    Parameters
-    ----------
-    ns : int or None
-        Nanoseconds since 1970-01-01T00:00:00Z. [ns]
-
-    Returns
-    -------
-    datetime or None
-        Aware, in UTC; None for None.
-    """
-    if ns is None:
-        return None
-    return _EPOCH + timedelta(microseconds=ns // 1000)
-
-
-def now_ns():
-    """The current UTC time in integer nanoseconds since the Unix epoch. [ns]"""
-    return ns_from_datetime(datetime.now(UTC))
-
-
-def first_line(exc):
-    """The first non-empty line of an exception's message (drivers' messages run on)."""
-    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-    return lines[0] if lines else type(exc).__name__
 
 
 # --- field checks: each names the row and field, what is allowed and what came ---
@@ -195,6 +46,20 @@ def _where(row, name):
     return f"{type(row).__name__}.{name}"
 
 
+def _storable(row, name, value):
+    """Text both backends store as it is: UTF-8 (no lone surrogates from undecodable
+    file names) and no NUL, which PostgreSQL's text refuses."""
+    if not isinstance(value, str):
+        raise HistoryError(f"{_where(row, name)} must be text, got {value!r}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise HistoryError(f"{_where(row, name)} must be UTF-8 text, got {value!r}") from None
+    if "\x00" in value:
+        raise HistoryError(f"{_where(row, name)} must not hold a NUL character, got {value!r}")
+    return value
+
+
 def _text(row, name, *, optional=False):
     value = getattr(row, name)
     if value is None and optional:
@@ -203,7 +68,7 @@ def _text(row, name, *, optional=False):
         value = os.fspath(value)
     if not isinstance(value, str) or not value.strip() or "\n" in value or "\r" in value:
         raise HistoryError(f"{_where(row, name)} must be one line of text, got {value!r}")
-    _set(row, name, value)
+    _set(row, name, _storable(row, name, value))
 
 
 def _one_line(row, name):
@@ -211,8 +76,7 @@ def _one_line(row, name):
     value = getattr(row, name)
     if value is None:
         return
-    if not isinstance(value, str):
-        raise HistoryError(f"{_where(row, name)} must be text, got {value!r}")
+    value = _storable(row, name, value)
     _set(row, name, " ".join(value.split()) or None)
 
 
@@ -223,7 +87,8 @@ def _float(row, name, *, required=False):
     if value is not None:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise HistoryError(f"{_where(row, name)} must be a number, got {value!r}")
-        value = float(value)
+        # NaN is NULL; -0.0 is 0.0 (SQLite keeps an integral REAL as an integer).
+        value = float(value) + 0.0
         if math.isnan(value):
             value = None
     if value is None and required:
@@ -528,8 +393,7 @@ class BaselineRow:
         _bool(self, "stale")
         _one_line(self, "stale_reason")
         _int(self, "stale_at_ns")
-        if not isinstance(self.note, str):
-            raise HistoryError(f"BaselineRow.note must be text, got {self.note!r}")
+        _storable(self, "note", self.note)
         _int(self, "created_at_ns")
         if self.stale and self.stale_reason is None:
             raise HistoryError("BaselineRow.stale_reason must say why a stale baseline is stale")
@@ -580,8 +444,7 @@ class AnchorRow:
         _float(self, "value_rad", required=True)
         _float(self, "u_value_rad")
         _json(self, "input", dict)
-        if not isinstance(self.note, str):
-            raise HistoryError(f"AnchorRow.note must be text, got {self.note!r}")
+        _storable(self, "note", self.note)
         _int(self, "created_at_ns")
 
 

@@ -10,7 +10,7 @@ fails leaves the history as it was (DDL is transactional on both backends).
 The DDL is shared; only the id column differs (``{id}``). Types: text as TEXT;
 floats as DOUBLE PRECISION (REAL affinity in SQLite); booleans as BOOLEAN;
 times as BIGINT nanoseconds since the Unix epoch, UTC; JSON as canonical TEXT
-(:func:`imu_square.monitor.rows.canonical_json`), which reads back
+(:func:`imu_square.monitor.encoding.canonical_json`), which reads back
 byte-identical on both backends, where PostgreSQL's ``jsonb`` would reorder it.
 
 Versions:
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 from imu_square import __version__
 from imu_square.errors import HistoryError
-from imu_square.monitor.rows import ANCHOR_METHODS, EVALUATION_STATES, first_line, now_ns
+from imu_square.monitor.encoding import first_line, now_ns
+from imu_square.monitor.rows import ANCHOR_METHODS, EVALUATION_STATES
 
 _ID = {
     "sqlite": "INTEGER PRIMARY KEY",

@@ -16,11 +16,12 @@
 
 import os
 import sqlite3
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
 from imu_square.errors import HistoryError
-from imu_square.monitor.rows import first_line
+from imu_square.monitor.encoding import first_line
 
 #: RETURNING needs SQLite 3.35.
 MIN_SQLITE = (3, 35, 0)
@@ -62,7 +63,7 @@ class SqliteBackend:
             raise self._error(exc) from exc
         try:
             self.execute("PRAGMA foreign_keys = ON")
-            mode = self.query("PRAGMA journal_mode = WAL")[0][0]
+            mode = self._switch_to_wal()
             if mode.lower() != "wal":
                 raise HistoryError(
                     f"history {self.location}: the file system does not allow SQLite's WAL "
@@ -73,6 +74,23 @@ class SqliteBackend:
         except BaseException:
             self.conn.close()
             raise
+
+    def _switch_to_wal(self):
+        """Set the WAL journal, waiting out other processes doing the same.
+
+        Two processes opening a fresh file at once may both read it in rollback
+        mode and then both need the exclusive lock to switch: SQLite returns
+        "locked" at once to one of them, without the busy handler (it would
+        deadlock). Its statement has then released its lock, so retry.
+        """
+        deadline = time.monotonic() + self.busy_timeout_s
+        while True:
+            try:
+                return self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            except sqlite3.Error as exc:
+                if "locked" not in str(exc) or time.monotonic() > deadline:
+                    raise self._error(exc) from exc
+            time.sleep(0.01)
 
     def _error(self, exc):
         """One line naming the file, for any sqlite3 error."""

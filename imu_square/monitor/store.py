@@ -8,7 +8,9 @@
 (psycopg 3, extra ``imu-square[postgres]``), checks the history, creates or
 migrates its schema (:mod:`imu_square.monitor.schema`) and returns a
 :class:`History`. Its methods take and return the frozen rows of
-:mod:`imu_square.monitor.rows`.
+:mod:`imu_square.monitor.rows` (imported here too, with the keys of a run:
+:func:`file_sha256` of the recording and :func:`settings_hash` of the
+analysis settings).
 
 Every write method is one transaction of its own, unless it runs inside
 ``with history.transaction():``, which makes many writes (a replay's batch)
@@ -36,15 +38,36 @@ from pathlib import Path
 from imu_square.errors import HistoryError
 from imu_square.log import logger
 from imu_square.monitor import schema
+from imu_square.monitor.encoding import (
+    canonical_json,
+    datetime_from_ns,
+    file_sha256,
+    now_ns,
+    ns_from_datetime,
+    settings_hash,
+)
 from imu_square.monitor.rows import (
+    EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
     EvaluationRow,
     RunRow,
-    canonical_json,
-    now_ns,
-    ns_from_datetime,
 )
+
+__all__ = [
+    "EVALUATION_STATES",
+    "AnchorRow",
+    "BaselineRow",
+    "EvaluationRow",
+    "History",
+    "RunRow",
+    "datetime_from_ns",
+    "default_history_path",
+    "file_sha256",
+    "ns_from_datetime",
+    "open_history",
+    "settings_hash",
+]
 
 #: Seconds a writer waits for another process's transaction by default.
 BUSY_TIMEOUT_S = 60.0
@@ -310,9 +333,9 @@ class History:
         machine_id : str
             The machine.
         recording_sha256 : str
-            :func:`~imu_square.monitor.rows.file_sha256` of the recording.
+            :func:`file_sha256` of the recording.
         settings_hash : str
-            :func:`~imu_square.monitor.rows.settings_hash` of the settings.
+            :func:`settings_hash` of the settings.
 
         Returns
         -------
@@ -597,6 +620,8 @@ class History:
         """Store the monitor's verdict on a run; a new verdict on the same
         (run, baseline) replaces the old one (a replay re-evaluates).
 
+        An invalid run's verdict can only be ``invalid``: it never moves a chart.
+
         Parameters
         ----------
         row : EvaluationRow
@@ -623,9 +648,14 @@ class History:
         )
         updates = ", ".join(f"{c} = excluded.{c}" for c in columns)
         with self._write():
-            run = self._conn.query("SELECT machine_id FROM runs WHERE id = ?", (row.run_id,))
+            run = self._conn.query("SELECT machine_id, valid FROM runs WHERE id = ?", (row.run_id,))
             if not run:
                 raise HistoryError(f"history {self.location}: no run {row.run_id!r}")
+            if not run[0][1] and row.state != "invalid":
+                raise HistoryError(
+                    f"EvaluationRow.state must be 'invalid' for the invalid run {row.run_id}, "
+                    f"got {row.state!r}"
+                )
             if row.baseline_id is not None:
                 base = self._conn.query(
                     "SELECT machine_id FROM baselines WHERE id = ?", (row.baseline_id,)
