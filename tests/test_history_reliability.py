@@ -169,6 +169,27 @@ def test_a_writer_held_up_beyond_the_busy_timeout_fails_with_one_line(location, 
         assert [r.id for r in h.runs(MACHINE)] == [_committed(held)[6]]
 
 
+def test_a_write_that_times_out_inside_a_transaction_is_undone_alone(tmp_path):
+    """PostgreSQL locks rows, so a transaction meets another's lock mid-way."""
+    location = pg_server.location_for("postgresql", tmp_path)
+    release = tmp_path / "release"
+    holder = _child("hold", location, 5, release)
+    assert holder.stdout.readline() == "holding\n", holder.stderr.read()
+    try:
+        with open_history(location, busy_timeout_s=0.3) as h:
+            with h.transaction():
+                h.add_run(run_for(4))
+                with pytest.raises(HistoryError, match="another process held a lock"):
+                    h.add_run(run_for(5))  # the holder's uncommitted recording
+                h.add_run(run_for(6))
+            release.touch()
+            holder.communicate(timeout=60)
+            assert [index_of(r) for r in h.runs(MACHINE)] == [4, 5, 6]
+    finally:
+        release.touch()
+        holder.wait(60)
+
+
 # --- SQLite files ---
 
 

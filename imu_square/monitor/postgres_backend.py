@@ -131,6 +131,15 @@ class PostgresBackend:
         except self._psycopg.Error as exc:  # from COMMIT itself
             raise self._error(exc) from exc
 
+    @contextmanager
+    def savepoint(self):
+        """A savepoint inside the open transaction: undone alone if the body fails."""
+        try:
+            with self.conn.transaction():  # nested: psycopg makes it a savepoint
+                yield
+        except self._psycopg.Error as exc:
+            raise self._error(exc) from exc
+
     def lock_schema(self):
         """Serialise schema changes of this schema across processes, until the commit."""
         self.query(

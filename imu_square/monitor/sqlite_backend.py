@@ -142,6 +142,21 @@ class SqliteBackend:
                     pass  # the connection is gone or the transaction already ended
             raise
 
+    @contextmanager
+    def savepoint(self):
+        """A savepoint inside the open transaction: undone alone if the body fails."""
+        self.execute("SAVEPOINT imu_square_write")
+        try:
+            yield
+        except BaseException:
+            try:
+                self.conn.execute("ROLLBACK TO imu_square_write")
+                self.conn.execute("RELEASE imu_square_write")
+            except sqlite3.Error:
+                pass  # the whole transaction is gone: the caller's rollback reports it
+            raise
+        self.execute("RELEASE imu_square_write")
+
     def lock_schema(self):
         """Nothing to do: ``BEGIN IMMEDIATE`` already holds the one write lock."""
 

@@ -148,12 +148,11 @@ def open_history(location=None, *, busy_timeout_s=BUSY_TIMEOUT_S):
         raise HistoryError(
             f"history location must be a file path or a postgresql:// URL, got {location!r}"
         )
-    m = _URL.match(str(location))
     if is_postgres_url(location):
         from imu_square.monitor.postgres_backend import PostgresBackend
 
         backend = PostgresBackend(str(location), busy_timeout_s)
-    elif m:
+    elif _URL.match(str(location)):
         raise HistoryError(
             f"history location must be a file path or a postgresql:// URL, got {location!r}"
         )
@@ -231,8 +230,10 @@ class History:
     def transaction(self):
         """Make the writes in the ``with`` block one transaction: all land or none.
 
-        Blocks nest (an inner block joins the outer one). An exception in the
-        block rolls everything back and propagates.
+        Blocks nest (an inner block joins the outer one). An exception out of
+        the block rolls everything back and propagates; a write method that
+        fails inside it undoes only its own changes, so a caller may catch its
+        error and go on.
         """
         if self._depth:
             self._depth += 1
@@ -249,7 +250,10 @@ class History:
                 self._depth = 0
 
     def _write(self):
-        return nullcontext() if self._depth else self.transaction()
+        # Inside a caller's transaction, each write is a savepoint: one that fails
+        # (a lock timeout, ...) is undone alone and the block may go on, on both
+        # backends (PostgreSQL would otherwise refuse every later statement).
+        return self._conn.savepoint() if self._depth else self.transaction()
 
     def _read(self):
         return nullcontext() if self._depth else self._conn.transaction(write=False)
