@@ -24,6 +24,7 @@ from imu_square.monitor import store
 from imu_square.monitor.encoding import canonical_json
 from imu_square.monitor.rows import RUN_FLOAT_FIELDS
 from imu_square.monitor.store import (
+    EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
     EvaluationRow,
@@ -344,6 +345,10 @@ def test_a_verdict_per_run_and_baseline_replaced_on_re_evaluation(history):
         history.add_evaluation(EvaluationRow(run_id=ids[3], baseline_id=base, state="ok"))
     with pytest.raises(HistoryError, match="no run 555"):
         history.add_evaluation(EvaluationRow(run_id=555, state="no_baseline"))
+    # The table's CHECK takes every state the rows allow.
+    for state in EVALUATION_STATES:
+        baseline = None if state in ("no_baseline", "invalid") else base
+        history.add_evaluation(EvaluationRow(run_id=ids[2], baseline_id=baseline, state=state))
     with pytest.raises(ImuSquareError, match="state must be one of"):
         EvaluationRow(run_id=1, state="fine")
     with pytest.raises(HistoryError, match="must name the baseline of a 'alarm' verdict"):

@@ -408,8 +408,7 @@ class History:
         if settings_hash is not None:
             where.append("settings_hash = ?")
             params.append(settings_hash)
-        with self._read():
-            return self._select_runs(" AND ".join(where), params)
+        return self._select_runs(" AND ".join(where), params)
 
     def machines(self):
         """The machine ids with a run or a baseline, sorted."""
