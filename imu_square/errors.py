@@ -38,6 +38,10 @@ class AcquisitionError(ImuSquareError):
     """The serial link or the device misbehaved in a way the recorder cannot absorb."""
 
 
+class HistoryError(ImuSquareError):
+    """The monitor's history cannot be opened, read or written as asked."""
+
+
 class ImuSquareWarning(UserWarning):
     """A recoverable oddity: the result is still produced, but say so."""
 

@@ -104,7 +104,17 @@ def _minimum_zone(s, r):
     )
     if res.status != 0:  # a bounded feasible LP: cannot happen short of a HiGHS failure
         raise ImuSquareError(f"minimum-zone line: linprog failed: {res.message}")
-    a, b, _ = res.x
+    a, b, t = res.x
+    # Polish to rounding: the optimum is a line through two of the readings that
+    # touch the zone (equioscillation); HiGHS places it only to its tolerance.
+    touching = np.flatnonzero(np.abs(np.abs(v - a - b * u) - t) <= 1e-6 * max(t, 1e-12))
+    for i in touching:
+        for j in touching:
+            if u[j] > u[i]:
+                bj = (v[j] - v[i]) / (u[j] - u[i])
+                dj = v - bj * u
+                if np.ptp(dj) < np.ptp(v - b * u):
+                    b, a = bj, 0.5 * (dj.max() + dj.min())
     slope = b * r_scale / s_scale
     return slope, r0 + a * r_scale - slope * s0
 

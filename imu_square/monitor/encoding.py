@@ -1,0 +1,163 @@
+"""How values go into the history and come out: canonical JSON, keys, times, messages.
+
+- :func:`canonical_json` writes JSON with sorted keys, no spaces, ASCII only
+  and finite numbers, so equal values give equal text on every backend;
+- :func:`settings_hash` and :func:`file_sha256` are the two halves of a run's
+  key besides the machine: the analysis settings and the recording's bytes;
+- times are integer nanoseconds since the Unix epoch, UTC, like MCAP's.
+"""
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping
+from datetime import UTC, datetime, timedelta
+
+from imu_square.errors import HistoryError, RecordingError
+
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
+def canonical_json(value, name="value"):
+    """The canonical JSON text of ``value``: sorted keys, no spaces, ASCII, finite numbers.
+
+    Parameters
+    ----------
+    value : object
+        Dicts, lists, tuples, text, numbers, booleans, None, numpy arrays and
+        scalars. Non-finite floats are written as null.
+    name : str
+        What ``value`` is, for the error message.
+
+    Returns
+    -------
+    str
+        The JSON text; equal values give equal text.
+    """
+    return json.dumps(
+        json_native(value, name),
+        sort_keys=True,
+        separators=(",", ":"),
+        ensure_ascii=True,
+        allow_nan=False,
+    )
+
+
+def json_native(value, name="value"):
+    """``value`` with only JSON-native types: what it reads back as from the history.
+
+    Parameters
+    ----------
+    value : object
+        See :func:`canonical_json`.
+    name : str
+        What ``value`` is, for the error message.
+
+    Returns
+    -------
+    object
+        Dicts with text keys, lists, text, int, finite float, bool or None.
+    """
+    if value is None or isinstance(value, str | bool):
+        return value
+    if isinstance(value, int):
+        return int(value)
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): json_native(v, name) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_native(v, name) for v in value]
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy array or scalar
+        return json_native(value.tolist(), name)
+    raise HistoryError(
+        f"{name} must hold JSON values (dicts, lists, text, numbers), "
+        f"got a {type(value).__name__}: {value!r}"
+    )
+
+
+def settings_hash(settings):
+    """SHA-256 of the analysis settings' canonical JSON: the runs' settings key.
+
+    Parameters
+    ----------
+    settings : dict
+        The analysis settings, as JSON values (see :func:`canonical_json`).
+
+    Returns
+    -------
+    str
+        64 lower-case hexadecimal digits.
+    """
+    return hashlib.sha256(canonical_json(settings, "settings").encode("utf-8")).hexdigest()
+
+
+def file_sha256(path):
+    """SHA-256 of a recording's bytes: the runs' recording key.
+
+    Parameters
+    ----------
+    path : str or Path
+        The recording.
+
+    Returns
+    -------
+    str
+        64 lower-case hexadecimal digits.
+    """
+    digest = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            while chunk := f.read(1 << 20):
+                digest.update(chunk)
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read the recording: {exc.strerror}") from None
+    return digest.hexdigest()
+
+
+def ns_from_datetime(when):
+    """Integer nanoseconds since the Unix epoch of an aware datetime.
+
+    Parameters
+    ----------
+    when : datetime
+        A time with its time zone.
+
+    Returns
+    -------
+    int
+        Nanoseconds since 1970-01-01T00:00:00Z. [ns]
+    """
+    if not isinstance(when, datetime) or when.utcoffset() is None:
+        raise HistoryError(f"a time must be a datetime with its time zone, got {when!r}")
+    delta = when - _EPOCH
+    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+
+
+def datetime_from_ns(ns):
+    """The UTC datetime of integer nanoseconds since the Unix epoch (to the microsecond).
+
+    Parameters
+    ----------
+    ns : int or None
+        Nanoseconds since 1970-01-01T00:00:00Z. [ns]
+
+    Returns
+    -------
+    datetime or None
+        Aware, in UTC; None for None.
+    """
+    if ns is None:
+        return None
+    return _EPOCH + timedelta(microseconds=ns // 1000)
+
+
+def now_ns():
+    """The current UTC time in integer nanoseconds since the Unix epoch. [ns]"""
+    return ns_from_datetime(datetime.now(UTC))
+
+
+def first_line(exc):
+    """The first non-empty line of an exception's message (drivers' messages run on)."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    return lines[0] if lines else type(exc).__name__

@@ -1,0 +1,501 @@
+"""What one row of the monitor's history holds: a run, a baseline, an anchor, a verdict.
+
+The rows are frozen dataclasses, checked and normalised when they are built,
+so that a row reads back from either backend exactly as it was stored:
+
+- times are integer nanoseconds since the Unix epoch, UTC (fields ``*_ns``),
+  like the times in MCAP (:mod:`imu_square.monitor.encoding` converts);
+- a float field holds a Python float or None (NULL); NaN becomes None, since
+  SQLite stores NaN as NULL anyway, and -0.0 becomes 0.0;
+- text fields are UTF-8 without NUL (PostgreSQL's text refuses NUL);
+- the JSON fields (``settings``, ``quality``, ``warnings``, ``per_cycle``,
+  ``result``, ``input``, ``statistics``) hold JSON values only: numpy arrays
+  become lists, numpy scalars Python numbers, non-finite floats None, tuples
+  lists and keys text. They are stored as canonical JSON text
+  (:func:`~imu_square.monitor.encoding.canonical_json`), byte-identical
+  whichever backend or process wrote them. Treat them as read-only.
+
+A field ``id`` or ``created_at_ns`` left None is filled in by the store.
+"""
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+
+from imu_square import __version__
+from imu_square.errors import HistoryError, check_option
+from imu_square.monitor.encoding import datetime_from_ns, json_native, settings_hash
+
+#: The monitor's verdicts on a run (issue 11, section 5).
+EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
+#: The reference methods an anchor can come from.
+ANCHOR_METHODS = ("ballbar", "diagonals")
+
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
+# --- field checks: each names the row and field, what is allowed and what came ---
+
+
+def _set(row, name, value):
+    object.__setattr__(row, name, value)
+
+
+def _where(row, name):
+    return f"{type(row).__name__}.{name}"
+
+
+def _storable(row, name, value):
+    """Text both backends store as it is: UTF-8 (no lone surrogates from undecodable
+    file names) and no NUL, which PostgreSQL's text refuses."""
+    if not isinstance(value, str):
+        raise HistoryError(f"{_where(row, name)} must be text, got {value!r}")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        raise HistoryError(f"{_where(row, name)} must be UTF-8 text, got {value!r}") from None
+    if "\x00" in value:
+        raise HistoryError(f"{_where(row, name)} must not hold a NUL character, got {value!r}")
+    return value
+
+
+def _text(row, name, *, optional=False):
+    value = getattr(row, name)
+    if value is None and optional:
+        return
+    if isinstance(value, os.PathLike):
+        value = os.fspath(value)
+    if not isinstance(value, str) or not value.strip() or "\n" in value or "\r" in value:
+        raise HistoryError(f"{_where(row, name)} must be one line of text, got {value!r}")
+    _set(row, name, _storable(row, name, value))
+
+
+def _one_line(row, name):
+    """Whitespace runs (newlines too) collapse to one space: a reason is one line."""
+    value = getattr(row, name)
+    if value is None:
+        return
+    value = _storable(row, name, value)
+    _set(row, name, " ".join(value.split()) or None)
+
+
+def _float(row, name, *, required=False):
+    value = getattr(row, name)
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):
+        value = value.tolist()
+    if value is not None:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise HistoryError(f"{_where(row, name)} must be a number, got {value!r}")
+        # NaN is NULL; -0.0 is 0.0 (SQLite keeps an integral REAL as an integer).
+        value = float(value) + 0.0
+        if math.isnan(value):
+            value = None
+    if value is None and required:
+        raise HistoryError(f"{_where(row, name)} must be a number, got {getattr(row, name)!r}")
+    _set(row, name, value)
+
+
+def _int(row, name, *, optional=True, minimum=None):
+    value = getattr(row, name)
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):
+        value = value.tolist()
+    if value is None and optional:
+        return
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise HistoryError(f"{_where(row, name)} must be an integer, got {value!r}")
+    if not -(2**63) <= value < 2**63:  # BIGINT, and nanoseconds up to the year 2262
+        raise HistoryError(f"{_where(row, name)} must fit in 64 bits, got {value!r}")
+    if minimum is not None and value < minimum:
+        raise HistoryError(f"{_where(row, name)} must be at least {minimum}, got {value!r}")
+    _set(row, name, int(value))
+
+
+def _bool(row, name):
+    value = getattr(row, name)
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):
+        value = value.tolist()
+    if not isinstance(value, bool):
+        raise HistoryError(f"{_where(row, name)} must be True or False, got {value!r}")
+
+
+def _json(row, name, kind):
+    value = json_native(getattr(row, name), _where(row, name))
+    if not isinstance(value, kind):
+        raise HistoryError(
+            f"{_where(row, name)} must be a JSON {kind.__name__}, got {type(value).__name__}"
+        )
+    _set(row, name, value)
+
+
+def _sha256(row, name, *, optional=False):
+    value = getattr(row, name)
+    if value is None and optional:
+        return
+    text = value.lower() if isinstance(value, str) else value
+    if not isinstance(text, str) or not _SHA256.fullmatch(text):
+        raise HistoryError(f"{_where(row, name)} must be 64 hexadecimal digits, got {value!r}")
+    _set(row, name, text)
+
+
+#: RunRow's float fields, in the order of the table's columns.
+RUN_FLOAT_FIELDS = (
+    "squareness_rad",
+    "u_squareness_rad",
+    "u_squareness_bootstrap_rad",
+    "dof",
+    "crb_rad",
+    "theta_x_rad",
+    "theta_y_rad",
+    "eps_c_rad",
+    "u_eps_c_rad",
+    "servo_mismatch_rad",
+    "u_servo_mismatch_rad",
+    "noise_density_m_s2_rthz",
+    "amp_x_m_s2",
+    "amp_y_m_s2",
+    "temperature_start_c",
+    "temperature_end_c",
+    "temperature_mean_c",
+    "time_since_power_on_s",
+)
+_VALID_NEEDS = ("squareness_rad", "u_squareness_rad")
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunRow:
+    """One analysed run of one machine.
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    machine_id : str
+        The machine the run was recorded on.
+    recording_path : str
+        The recording as the caller named it (stored as given).
+    recording_sha256 : str
+        SHA-256 of the recording's bytes (:func:`file_sha256`).
+    settings : dict
+        The analysis settings the run was analysed with (JSON values).
+    settings_hash : str or None
+        :func:`settings_hash` of ``settings``; computed when None.
+    software_version : str
+        imu-square's version that analysed the run.
+    recorded_at_ns : int or None
+        When the recording started, UTC; None only for a file too broken to
+        tell (such a run sorts last). [ns]
+    analysed_at_ns : int or None
+        When the analysis ran, UTC; stamped by the store when None. [ns]
+    valid : bool
+        False for a run that failed quality: it never enters a baseline or an
+        alarm statistic.
+    invalid_reason : str or None
+        Why the run is invalid, one line; None for a valid run.
+    squareness_rad, u_squareness_rad : float or None
+        ``theta_y - theta_x`` (paper, Eq. 4) and its type A standard
+        uncertainty; required for a valid run. [rad]
+    u_squareness_bootstrap_rad : float or None
+        Bootstrap standard deviation over cycles. [rad]
+    dof : float or None
+        Degrees of freedom of ``u_squareness_rad``.
+    crb_rad : float or None
+        Cramér-Rao bound of ``squareness_rad``. [rad]
+    theta_x_rad, theta_y_rad : float or None
+        Fitted phases. [rad]
+    eps_c_rad, u_eps_c_rad : float or None
+        Sensor rotation about Z and its uncertainty. [rad]
+    servo_mismatch_rad, u_servo_mismatch_rad : float or None
+        Servo mismatch and its uncertainty. [rad]
+    noise_density_m_s2_rthz : float or None
+        Noise density behind ``crb_rad``. [m/s^2/sqrt(Hz)]
+    amp_x_m_s2, amp_y_m_s2 : float or None
+        Fitted amplitudes. [m/s^2]
+    temperature_start_c, temperature_end_c, temperature_mean_c : float or None
+        Sensor temperature at the start, at the end and on average. [degC]
+    time_since_power_on_s : float or None
+        Time from the sensor's power-on to the recording's start. [s]
+    cycles_ccw, cycles_cw : int or None
+        Cycles used per direction.
+    quality : dict
+        Quality flags.
+    warnings : tuple of str
+        Human-readable warnings.
+    per_cycle : dict
+        Per cycle-pair values and times, for the drift regression.
+    result : dict
+        The whole ``RunResult.to_json_dict()``.
+    """
+
+    id: int | None = None
+    machine_id: str
+    recording_path: str
+    recording_sha256: str
+    settings: dict
+    settings_hash: str | None = None
+    software_version: str = __version__
+    recorded_at_ns: int | None
+    analysed_at_ns: int | None = None
+    valid: bool
+    invalid_reason: str | None = None
+    squareness_rad: float | None = None
+    u_squareness_rad: float | None = None
+    u_squareness_bootstrap_rad: float | None = None
+    dof: float | None = None
+    crb_rad: float | None = None
+    theta_x_rad: float | None = None
+    theta_y_rad: float | None = None
+    eps_c_rad: float | None = None
+    u_eps_c_rad: float | None = None
+    servo_mismatch_rad: float | None = None
+    u_servo_mismatch_rad: float | None = None
+    noise_density_m_s2_rthz: float | None = None
+    amp_x_m_s2: float | None = None
+    amp_y_m_s2: float | None = None
+    temperature_start_c: float | None = None
+    temperature_end_c: float | None = None
+    temperature_mean_c: float | None = None
+    time_since_power_on_s: float | None = None
+    cycles_ccw: int | None = None
+    cycles_cw: int | None = None
+    quality: dict = field(default_factory=dict)
+    warnings: tuple = ()
+    per_cycle: dict = field(default_factory=dict)
+    result: dict = field(default_factory=dict, repr=False)
+
+    def __post_init__(self):
+        _int(self, "id", minimum=1)
+        _text(self, "machine_id")
+        _text(self, "recording_path")
+        _sha256(self, "recording_sha256")
+        _json(self, "settings", dict)
+        _sha256(self, "settings_hash", optional=True)
+        if self.settings_hash is None:
+            _set(self, "settings_hash", settings_hash(self.settings))
+        _text(self, "software_version")
+        _int(self, "recorded_at_ns")
+        _int(self, "analysed_at_ns")
+        _bool(self, "valid")
+        _one_line(self, "invalid_reason")
+        for name in RUN_FLOAT_FIELDS:
+            # A valid run has a squareness and its uncertainty.
+            _float(self, name, required=self.valid and name in _VALID_NEEDS)
+        _int(self, "cycles_ccw", minimum=0)
+        _int(self, "cycles_cw", minimum=0)
+        _json(self, "quality", dict)
+        _json(self, "warnings", list)
+        if not all(isinstance(w, str) for w in self.warnings):
+            raise HistoryError(f"RunRow.warnings must be text, got {self.warnings!r}")
+        _set(self, "warnings", tuple(self.warnings))
+        _json(self, "per_cycle", dict)
+        _json(self, "result", dict)
+        if self.valid:
+            if self.invalid_reason is not None:
+                raise HistoryError(
+                    f"RunRow.invalid_reason must be None for a valid run, got "
+                    f"{self.invalid_reason!r}"
+                )
+        elif self.invalid_reason is None:
+            raise HistoryError("RunRow.invalid_reason must say why an invalid run is invalid")
+
+    @property
+    def recorded_at(self):
+        """When the recording started (aware UTC datetime, or None)."""
+        return datetime_from_ns(self.recorded_at_ns)
+
+    @property
+    def analysed_at(self):
+        """When the run was analysed (aware UTC datetime, or None)."""
+        return datetime_from_ns(self.analysed_at_ns)
+
+
+@dataclass(frozen=True, kw_only=True)
+class BaselineRow:
+    """A machine's baseline: its own squareness when the monitor was set up.
+
+    The machine's current baseline is its latest; a stale one stays current
+    (the monitor then says ``stale_baseline``) until a new one is set.
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    machine_id : str
+        The machine.
+    run_ids : tuple of int
+        The valid runs it was set from, all analysed with the same settings.
+    squareness_mean_rad : float
+        Mean of the runs' ``squareness_rad``. [rad]
+    squareness_sd_rad : float or None
+        Standard deviation of the runs' ``squareness_rad`` (their spread). [rad]
+    u_squareness_mean_rad : float
+        Standard uncertainty of the mean. [rad]
+    eps_c_rad, u_eps_c_rad : float or None
+        Sensor rotation about Z and its uncertainty, to tell a remount. [rad]
+    dof : float or None
+        Degrees of freedom of ``u_squareness_mean_rad``.
+    settings_hash : str or None
+        The runs' settings hash; the store fills it in from the runs.
+    first_run_at_ns, last_run_at_ns : int or None
+        Recording times of the first and the last run; the store fills them
+        in from the runs. [ns]
+    stale : bool
+        True once the sensor was found remounted (see ``stale_reason``).
+    stale_reason : str or None
+        Why the baseline went stale, one line.
+    stale_at_ns : int or None
+        When it was marked stale. [ns]
+    note : str
+        Free text from the user.
+    created_at_ns : int or None
+        When it was set; stamped by the store when None. [ns]
+    """
+
+    id: int | None = None
+    machine_id: str
+    run_ids: tuple
+    squareness_mean_rad: float
+    squareness_sd_rad: float | None = None
+    u_squareness_mean_rad: float
+    eps_c_rad: float | None = None
+    u_eps_c_rad: float | None = None
+    dof: float | None = None
+    settings_hash: str | None = None
+    first_run_at_ns: int | None = None
+    last_run_at_ns: int | None = None
+    stale: bool = False
+    stale_reason: str | None = None
+    stale_at_ns: int | None = None
+    note: str = ""
+    created_at_ns: int | None = None
+
+    def __post_init__(self):
+        _int(self, "id", minimum=1)
+        _text(self, "machine_id")
+        ids = self.run_ids
+        if isinstance(ids, str | bytes) or not hasattr(ids, "__iter__"):
+            raise HistoryError(f"BaselineRow.run_ids must be run ids, got {ids!r}")
+        ids = tuple(int(i) if hasattr(i, "dtype") else i for i in ids)
+        if not ids or not all(isinstance(i, int) and not isinstance(i, bool) for i in ids):
+            raise HistoryError(f"BaselineRow.run_ids must be one or more run ids, got {ids!r}")
+        if len(set(ids)) != len(ids):
+            raise HistoryError(f"BaselineRow.run_ids must not repeat a run, got {ids!r}")
+        _set(self, "run_ids", tuple(sorted(ids)))
+        _float(self, "squareness_mean_rad", required=True)
+        _float(self, "squareness_sd_rad")
+        _float(self, "u_squareness_mean_rad", required=True)
+        _float(self, "eps_c_rad")
+        _float(self, "u_eps_c_rad")
+        _float(self, "dof")
+        _sha256(self, "settings_hash", optional=True)
+        _int(self, "first_run_at_ns")
+        _int(self, "last_run_at_ns")
+        _bool(self, "stale")
+        _one_line(self, "stale_reason")
+        _int(self, "stale_at_ns")
+        _storable(self, "note", self.note)
+        _int(self, "created_at_ns")
+        if self.stale and self.stale_reason is None:
+            raise HistoryError("BaselineRow.stale_reason must say why a stale baseline is stale")
+
+    @property
+    def created_at(self):
+        """When the baseline was set (aware UTC datetime, or None)."""
+        return datetime_from_ns(self.created_at_ns)
+
+
+@dataclass(frozen=True, kw_only=True)
+class AnchorRow:
+    """An absolute anchor of a baseline by a reference method.
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    baseline_id : int
+        The baseline it anchors.
+    method : {"ballbar", "diagonals"}
+        The reference method.
+    value_rad : float
+        The machine's squareness the method gave (``machine_squareness_rad``). [rad]
+    u_value_rad : float or None
+        Its standard uncertainty. [rad]
+    input : dict
+        The raw numbers the user gave (JSON values).
+    note : str
+        Free text from the user.
+    created_at_ns : int or None
+        When it was stored; stamped by the store when None. [ns]
+    """
+
+    id: int | None = None
+    baseline_id: int
+    method: str
+    value_rad: float
+    u_value_rad: float | None = None
+    input: dict = field(default_factory=dict)
+    note: str = ""
+    created_at_ns: int | None = None
+
+    def __post_init__(self):
+        _int(self, "id", minimum=1)
+        _int(self, "baseline_id", optional=False, minimum=1)
+        check_option("AnchorRow.method", self.method, ANCHOR_METHODS)
+        _float(self, "value_rad", required=True)
+        _float(self, "u_value_rad")
+        _json(self, "input", dict)
+        _storable(self, "note", self.note)
+        _int(self, "created_at_ns")
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluationRow:
+    """The monitor's verdict on one run against one baseline.
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    run_id : int
+        The run judged.
+    baseline_id : int or None
+        The baseline it was judged against; None when there was none
+        (``state`` is then ``no_baseline``, or ``invalid``).
+    state : str
+        One of :data:`EVALUATION_STATES`.
+    change_rad, u_change_rad : float or None
+        Change of ``squareness_rad`` since the baseline and its standard
+        uncertainty. [rad]
+    statistics : dict
+        The alarm charts' statistics (Shewhart, EWMA, CUSUM, ...), JSON values.
+    created_at_ns : int or None
+        When the verdict was stored; stamped by the store when None. [ns]
+    """
+
+    id: int | None = None
+    run_id: int
+    baseline_id: int | None = None
+    state: str
+    change_rad: float | None = None
+    u_change_rad: float | None = None
+    statistics: dict = field(default_factory=dict)
+    created_at_ns: int | None = None
+
+    def __post_init__(self):
+        _int(self, "id", minimum=1)
+        _int(self, "run_id", optional=False, minimum=1)
+        _int(self, "baseline_id", minimum=1)
+        check_option("EvaluationRow.state", self.state, EVALUATION_STATES)
+        if self.baseline_id is None and self.state not in ("no_baseline", "invalid"):
+            raise HistoryError(
+                f"EvaluationRow.baseline_id must name the baseline of a {self.state!r} verdict"
+            )
+        if self.baseline_id is not None and self.state == "no_baseline":
+            raise HistoryError(
+                f"EvaluationRow.baseline_id must be None for 'no_baseline', got "
+                f"{self.baseline_id!r}"
+            )
+        _float(self, "change_rad")
+        _float(self, "u_change_rad")
+        _json(self, "statistics", dict)
+        _int(self, "created_at_ns")

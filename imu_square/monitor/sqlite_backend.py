@@ -1,0 +1,240 @@
+"""The history in one SQLite file: the embedded default.
+
+- WAL journal with ``synchronous=FULL``: a transaction is on disk when its
+  COMMIT returns, and readers never block the writer.
+- ``isolation_level=None``: Python's sqlite3 then opens no transaction behind
+  our back (an insert left in an implicit transaction is lost on SIGKILL).
+  Writes are explicit ``BEGIN IMMEDIATE`` ... ``COMMIT``; a reader takes
+  ``BEGIN`` (deferred) for one consistent snapshot.
+- A busy timeout: a writer waits for another process's transaction to end,
+  up to ``busy_timeout_s``, rather than failing at once.
+- Foreign keys on; ``PRAGMA quick_check`` on open.
+- Back-ups through SQLite's backup API, which reads the committed pages of
+  the file *and* its ``-wal`` (a copy of the ``.db`` alone loses what the WAL
+  holds), into a temporary file beside the target, checked, then renamed.
+"""
+
+import os
+import sqlite3
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from imu_square.errors import HistoryError
+from imu_square.monitor.encoding import first_line
+
+#: RETURNING needs SQLite 3.35.
+MIN_SQLITE = (3, 35, 0)
+
+
+class SqliteBackend:
+    """One connection to a history file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The history file; created, with its folder, when missing.
+    busy_timeout_s : float
+        How long a writer waits for another process's transaction. [s]
+    """
+
+    name = "sqlite"
+
+    def __init__(self, path, busy_timeout_s):
+        self.path = Path(path).expanduser()
+        self.location = str(self.path)
+        self.busy_timeout_s = busy_timeout_s
+        if sqlite3.sqlite_version_info < MIN_SQLITE:
+            raise HistoryError(
+                f"history {self.location}: needs SQLite {'.'.join(map(str, MIN_SQLITE))} or "
+                f"later, this Python has {sqlite3.sqlite_version}"
+            )
+        if self.path.is_dir():
+            raise HistoryError(f"history {self.location}: is a folder, not a history file")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise HistoryError(
+                f"history {self.location}: cannot create its folder: {exc.strerror}"
+            ) from None
+        try:
+            self.conn = sqlite3.connect(self.path, timeout=busy_timeout_s, isolation_level=None)
+        except sqlite3.Error as exc:
+            raise self._error(exc) from exc
+        try:
+            self.execute("PRAGMA foreign_keys = ON")
+            mode = self._switch_to_wal()
+            if mode.lower() != "wal":
+                raise HistoryError(
+                    f"history {self.location}: the file system does not allow SQLite's WAL "
+                    f"journal (journal_mode stays {mode!r}); keep the history on a local disk"
+                )
+            self.execute("PRAGMA synchronous = FULL")
+            self.check()
+        except BaseException:
+            self.conn.close()
+            raise
+
+    def _switch_to_wal(self):
+        """Set the WAL journal, waiting out other processes doing the same.
+
+        Two processes opening a fresh file at once may both read it in rollback
+        mode and then both need the exclusive lock to switch: SQLite returns
+        "locked" at once to one of them, without the busy handler (it would
+        deadlock). Its statement has then released its lock, so retry.
+        """
+        deadline = time.monotonic() + self.busy_timeout_s
+        while True:
+            try:
+                return self.conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            except sqlite3.Error as exc:
+                if "locked" not in str(exc) or time.monotonic() > deadline:
+                    raise self._error(exc) from exc
+            time.sleep(0.01)
+
+    def _error(self, exc):
+        """One line naming the file, for any sqlite3 error."""
+        text = first_line(exc)
+        low = text.lower()
+        if "not a database" in low:
+            why = "not a SQLite database"
+        elif "malformed" in low or "corrupt" in low:
+            why = f"the database is damaged ({text}); restore it from a backup"
+        elif "unable to open" in low or "readonly" in low or "read-only" in low:
+            why = f"cannot open it for writing ({text}): is the location read-only?"
+        elif "locked" in low or "busy" in low:
+            why = (
+                f"another process held the history for more than {self.busy_timeout_s:g} s ({text})"
+            )
+        else:
+            why = text
+        return HistoryError(f"history {self.location}: {why}")
+
+    def execute(self, sql, params=()):
+        """Run one statement; return the number of rows it changed."""
+        try:
+            return self.conn.execute(sql, params).rowcount
+        except sqlite3.Error as exc:
+            raise self._error(exc) from exc
+
+    def query(self, sql, params=()):
+        """Run one statement; return all its rows as tuples."""
+        try:
+            return self.conn.execute(sql, params).fetchall()
+        except sqlite3.Error as exc:
+            raise self._error(exc) from exc
+
+    @contextmanager
+    def transaction(self, write):
+        """One transaction: ``BEGIN IMMEDIATE`` (write) or ``BEGIN`` (read), then COMMIT.
+
+        Any exception in the body rolls it back and propagates.
+        """
+        self.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+        try:
+            yield
+            self.execute("COMMIT")
+        except BaseException:
+            if self.conn.in_transaction:
+                try:
+                    self.conn.execute("ROLLBACK")
+                except sqlite3.Error:
+                    pass  # the connection is gone or the transaction already ended
+            raise
+
+    @contextmanager
+    def savepoint(self):
+        """A savepoint inside the open transaction: undone alone if the body fails."""
+        self.execute("SAVEPOINT imu_square_write")
+        try:
+            yield
+        except BaseException:
+            try:
+                self.conn.execute("ROLLBACK TO imu_square_write")
+                self.conn.execute("RELEASE imu_square_write")
+            except sqlite3.Error:
+                pass  # the whole transaction is gone: the caller's rollback reports it
+            raise
+        self.execute("RELEASE imu_square_write")
+
+    def lock_schema(self):
+        """Nothing to do: ``BEGIN IMMEDIATE`` already holds the one write lock."""
+
+    def tables(self):
+        """Names of the tables in the file."""
+        rows = self.query(
+            "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite\\_%' "
+            "ESCAPE '\\'"
+        )
+        return {r[0] for r in rows}
+
+    def columns(self, table):
+        """Column names of ``table``, in the table's order."""
+        return [r[1] for r in self.query(f"PRAGMA table_info({table})")]
+
+    def check(self):
+        """Run ``PRAGMA quick_check``; raise one line naming the file if it fails."""
+        problems = [r[0] for r in self.query("PRAGMA quick_check") if r[0] != "ok"]
+        if problems:
+            more = f" and {len(problems) - 1} more" if len(problems) > 1 else ""
+            raise HistoryError(
+                f"history {self.location}: the database is damaged (quick_check: "
+                f"{first_line(problems[0])}{more}); restore it from a backup"
+            )
+
+    def backup(self, path):
+        """Copy the history's committed state into the SQLite file ``path``.
+
+        The copy is written beside ``path``, checked with ``quick_check``,
+        switched to a rollback journal (one self-contained file) and renamed
+        over ``path``, so ``path`` is never a half-written file.
+
+        Parameters
+        ----------
+        path : str or Path
+            The backup file; replaced if it exists.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
+        dest = Path(path).expanduser()
+        if dest.is_dir():
+            raise HistoryError(f"history backup {dest}: is a folder, not a file")
+        if dest.exists() and dest.resolve() == self.path.resolve():
+            raise HistoryError(f"history backup {dest}: is the history itself")
+        tmp = dest.with_name(f".{dest.name}.{os.getpid()}.partial")
+        try:
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            target = sqlite3.connect(tmp, isolation_level=None)
+            try:
+                self.conn.backup(target)
+                problems = [r[0] for r in target.execute("PRAGMA quick_check") if r[0] != "ok"]
+                if problems:
+                    raise sqlite3.DatabaseError(f"the copy fails quick_check: {problems[0]}")
+                target.execute("PRAGMA journal_mode = DELETE")
+            finally:
+                target.close()
+            with open(tmp, "rb") as f:
+                os.fsync(f.fileno())
+            os.replace(tmp, dest)
+            _fsync_dir(dest.parent)
+        except (sqlite3.Error, OSError) as exc:
+            tmp.unlink(missing_ok=True)
+            raise HistoryError(
+                f"history {self.location}: backup to {dest} failed: {first_line(exc)}"
+            ) from exc
+        return dest
+
+    def close(self):
+        """Close the connection (the last one to close checkpoints the WAL)."""
+        self.conn.close()
+
+
+def _fsync_dir(folder):
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)

@@ -1,0 +1,181 @@
+"""The history's schema versions and migrations, on both backends."""
+
+import dataclasses
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pg_server
+import pytest
+from history_child import MACHINE, run_for
+
+from imu_square.errors import HistoryError
+from imu_square.monitor import schema
+from imu_square.monitor.encoding import canonical_json
+from imu_square.monitor.postgres_backend import PostgresBackend
+from imu_square.monitor.rows import EvaluationRow
+from imu_square.monitor.sqlite_backend import SqliteBackend
+from imu_square.monitor.store import is_postgres_url, open_history
+
+CHILD = Path(__file__).with_name("history_child.py")
+JSON_FIELDS = ("settings", "quality", "warnings", "per_cycle", "result")
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def location(request, tmp_path):
+    return pg_server.location_for(request.param, tmp_path)
+
+
+def _backend(location):
+    if is_postgres_url(location):
+        return PostgresBackend(location, 5.0)
+    return SqliteBackend(location, 5.0)
+
+
+def _insert(db, table, values):
+    names = ", ".join(values)
+    marks = ", ".join("?" * len(values))
+    return db.query(
+        f"INSERT INTO {table} ({names}) VALUES ({marks}) RETURNING id", list(values.values())
+    )[0][0]
+
+
+def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
+    db = _backend(location)
+    assert schema.migrate(db, target=1) == 1
+    assert "evaluations" not in db.tables()
+    v1_columns = db.columns("runs")
+    assert "temperature_start_c" not in v1_columns
+    # What an imu-square of schema version 1 wrote: its columns only.
+    row = run_for(1)
+    values = {}
+    for field in dataclasses.fields(row):
+        value = getattr(row, field.name)
+        column = field.name + "_json" if field.name in JSON_FIELDS else field.name
+        if column in v1_columns and column != "id":
+            values[column] = canonical_json(value) if field.name in JSON_FIELDS else value
+    with db.transaction(write=True):
+        run_id = _insert(db, "runs", values)
+        base = _insert(
+            db,
+            "baselines",
+            {
+                "machine_id": MACHINE,
+                "created_at_ns": 5,
+                "settings_hash": row.settings_hash,
+                "squareness_mean_rad": 1e-5,
+                "u_squareness_mean_rad": 1e-6,
+                "stale": False,
+                "note": "",
+            },
+        )
+        db.execute("INSERT INTO baseline_runs (baseline_id, run_id) VALUES (?, ?)", (base, run_id))
+    db.close()
+
+    with open_history(location) as h:
+        assert h.schema_version == 2
+        got = h.runs(MACHINE)
+        # The thermal columns are new in version 2: unknown for the old run.
+        assert got == [
+            dataclasses.replace(
+                row,
+                id=run_id,
+                temperature_start_c=None,
+                temperature_end_c=None,
+                temperature_mean_c=None,
+                time_since_power_on_s=None,
+            )
+        ]
+        assert h.current_baseline(MACHINE).run_ids == (run_id,)
+        h.add_evaluation(EvaluationRow(run_id=run_id, baseline_id=base, state="ok"))
+        assert h.add_run(run_for(2))[1]
+        assert h.run(h.runs(MACHINE)[1].id) == dataclasses.replace(
+            run_for(2), id=h.runs(MACHINE)[1].id
+        )
+        log = h._db.query("SELECT version, description FROM schema_version ORDER BY version")
+        assert log == [(m.version, m.description) for m in schema.MIGRATIONS]
+        migrated = {t: sorted(h._db.columns(t)) for t in schema.TABLES}
+    # The migrated history has the tables and columns of a fresh one.
+    fresh_location = pg_server.location_for(
+        "postgresql" if is_postgres_url(location) else "sqlite", tmp_path / "fresh"
+    )
+    with open_history(fresh_location) as fresh:
+        assert fresh._db.tables() == set(schema.TABLES)
+        assert {t: sorted(fresh._db.columns(t)) for t in schema.TABLES} == migrated
+
+
+def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):
+    with open_history(location) as h:
+        run_id = h.add_run(run_for(1))[0]
+    broken = schema.Migration(
+        3,
+        "broken on purpose",
+        (
+            "ALTER TABLE runs ADD COLUMN extra_c DOUBLE PRECISION",
+            "CREATE TABLE extra (x INTEGER)",
+            "CREATE TABLE evaluations (x INTEGER)",  # exists: the migration fails here
+        ),
+    )
+    monkeypatch.setattr(schema, "MIGRATIONS", (*schema.MIGRATIONS, broken))
+    with pytest.raises(HistoryError) as err:
+        open_history(location)
+    text = str(err.value)
+    assert "\n" not in text
+    assert text.startswith(
+        "history " + (location if not is_postgres_url(location) else "postgresql://")
+    )
+    assert "migration to schema version 3 (broken on purpose) failed, the history is left at " in (
+        text
+    )
+    assert "version 2: " in text and "already exists" in text
+    monkeypatch.undo()
+    with open_history(location) as h:
+        assert h.schema_version == 2
+        assert "extra_c" not in h._db.columns("runs")
+        assert "extra" not in h._db.tables()
+        assert h.runs(MACHINE) == [dataclasses.replace(run_for(1), id=run_id)]
+
+
+def test_a_newer_schema_is_refused(location):
+    with open_history(location) as h:
+        h._db.execute(
+            "INSERT INTO schema_version (version, description, applied_at_ns, software_version) "
+            "VALUES (?, ?, ?, ?)",
+            (7, "from the future", 0, "9.0"),
+        )
+    with pytest.raises(HistoryError, match=r"schema version 7 is newer than this imu-square") as e:
+        open_history(location)
+    assert str(e.value).endswith("knows (up to 2); upgrade imu-square")
+
+
+def test_tables_of_something_else_are_not_a_history(location):
+    db = _backend(location)
+    db.execute("CREATE TABLE runs (lap INTEGER, seconds REAL)")
+    db.close()
+    with pytest.raises(HistoryError, match=r"not an imu-square history: it has tables \['runs'\]"):
+        open_history(location)
+
+
+def test_processes_opening_a_fresh_history_at_once_create_it_once(location, tmp_path):
+    go = tmp_path / "go"
+    env = {**os.environ, "GO": str(go)}
+    procs = [
+        subprocess.Popen(
+            [sys.executable, str(CHILD), "open", location],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for _ in range(3)
+    ]
+    time.sleep(0.5)  # let them all start and wait
+    go.touch()
+    outs = [p.communicate(timeout=60) for p in procs]
+    assert [(p.returncode, out.strip()) for p, (out, _) in zip(procs, outs, strict=True)] == [
+        (0, "2")
+    ] * 3, [err for _, err in outs]
+    with open_history(location) as h:
+        assert h._db.query("SELECT version FROM schema_version ORDER BY version") == [(1,), (2,)]
