@@ -75,8 +75,10 @@ def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
     db.close()
 
     with open_history(location) as h:
-        assert h.schema_version == 2
+        assert h.schema_version == schema.latest_version()
         got = h.runs(MACHINE)
+        # the baseline of version 1 has no alarm design yet (version 3)
+        assert h.current_baseline(MACHINE).alarm_design == {}
         # The thermal columns are new in version 2: unknown for the old run.
         assert got == [
             dataclasses.replace(
@@ -109,8 +111,9 @@ def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
 def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):
     with open_history(location) as h:
         run_id = h.add_run(run_for(1))[0]
+    latest = schema.latest_version()
     broken = schema.Migration(
-        3,
+        latest + 1,
         "broken on purpose",
         (
             "ALTER TABLE runs ADD COLUMN extra_c DOUBLE PRECISION",
@@ -126,13 +129,14 @@ def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):
     assert text.startswith(
         "history " + (location if not is_postgres_url(location) else "postgresql://")
     )
-    assert "migration to schema version 3 (broken on purpose) failed, the history is left at " in (
-        text
-    )
-    assert "version 2: " in text and "already exists" in text
+    assert (
+        f"migration to schema version {latest + 1} (broken on purpose) failed, the history "
+        "is left at "
+    ) in text
+    assert f"version {latest}: " in text and "already exists" in text
     monkeypatch.undo()
     with open_history(location) as h:
-        assert h.schema_version == 2
+        assert h.schema_version == latest
         assert "extra_c" not in h._db.columns("runs")
         assert "extra" not in h._db.tables()
         assert h.runs(MACHINE) == [dataclasses.replace(run_for(1), id=run_id)]
@@ -147,7 +151,7 @@ def test_a_newer_schema_is_refused(location):
         )
     with pytest.raises(HistoryError, match=r"schema version 7 is newer than this imu-square") as e:
         open_history(location)
-    assert str(e.value).endswith("knows (up to 2); upgrade imu-square")
+    assert str(e.value).endswith(f"knows (up to {schema.latest_version()}); upgrade imu-square")
 
 
 def test_tables_of_something_else_are_not_a_history(location):
@@ -175,7 +179,8 @@ def test_processes_opening_a_fresh_history_at_once_create_it_once(location, tmp_
     go.touch()
     outs = [p.communicate(timeout=60) for p in procs]
     assert [(p.returncode, out.strip()) for p, (out, _) in zip(procs, outs, strict=True)] == [
-        (0, "2")
+        (0, str(schema.latest_version()))
     ] * 3, [err for _, err in outs]
     with open_history(location) as h:
-        assert h._db.query("SELECT version FROM schema_version ORDER BY version") == [(1,), (2,)]
+        versions = h._db.query("SELECT version FROM schema_version ORDER BY version")
+        assert versions == [(m.version,) for m in schema.MIGRATIONS]

@@ -243,6 +243,17 @@ def test_a_baseline_refuses_invalid_foreign_missing_or_mixed_runs(history):
     assert history.baselines(MACHINE) == []
 
 
+def test_a_baselines_alarm_design_is_kept_exactly(history):
+    ids = [history.add_run(run_for(i))[0] for i in range(3)]
+    base = history.add_baseline(_baseline(ids))
+    assert history.baseline(base).alarm_design == {}
+    design = {"arl0_nights": 730.0, "sigma_urad": 17.25, "shares": [0.2, 0.3, 0.5], "nu": None}
+    history.set_alarm_design(base, design)
+    assert history.current_baseline(MACHINE).alarm_design == design
+    with pytest.raises(HistoryError, match="no baseline 99"):
+        history.set_alarm_design(99, design)
+
+
 def test_anchors_belong_to_a_baseline(history):
     ids = [history.add_run(run_for(i))[0] for i in range(3)]
     base = history.add_baseline(_baseline(ids))

@@ -349,6 +349,10 @@ class BaselineRow:
         Free text from the user.
     created_at_ns : int or None
         When it was set; stamped by the store when None. [ns]
+    alarm_design : dict
+        The alarm charts designed for this baseline
+        (:meth:`~imu_square.monitor.alarms.AlarmDesign.to_json_dict`); empty until
+        designed.
     """
 
     id: int | None = None
@@ -368,6 +372,7 @@ class BaselineRow:
     stale_at_ns: int | None = None
     note: str = ""
     created_at_ns: int | None = None
+    alarm_design: dict = field(default_factory=dict)
 
     def __post_init__(self):
         _int(self, "id", minimum=1)
@@ -395,6 +400,7 @@ class BaselineRow:
         _int(self, "stale_at_ns")
         _storable(self, "note", self.note)
         _int(self, "created_at_ns")
+        _json(self, "alarm_design", dict)
         if self.stale and self.stale_reason is None:
             raise HistoryError("BaselineRow.stale_reason must say why a stale baseline is stale")
 

@@ -19,7 +19,8 @@ Versions:
 
 1. runs, baselines (and the runs each was set from), anchors;
 2. the monitor's verdicts (``evaluations``) and the thermal context of a run
-   that the drift regression reads (temperatures, time since power-on).
+   that the drift regression reads (temperatures, time since power-on);
+3. each baseline's alarm design, computed once when it is first needed.
 """
 
 from dataclasses import dataclass
@@ -173,6 +174,11 @@ MIGRATIONS = (
                 WHERE baseline_id IS NULL""",
             "CREATE INDEX evaluations_baseline ON evaluations (baseline_id)",
         ),
+    ),
+    Migration(
+        3,
+        "the alarm design of each baseline",
+        ("ALTER TABLE baselines ADD COLUMN alarm_design_json TEXT NOT NULL DEFAULT '{}'",),
     ),
 )
 

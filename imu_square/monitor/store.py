@@ -84,7 +84,9 @@ _RUN_JSON = {
 }
 _RUN_FIELDS = [f.name for f in fields(RunRow)]
 _RUN_COLUMNS = [_RUN_JSON.get(n, n) for n in _RUN_FIELDS]
+_BASELINE_JSON = {"alarm_design": "alarm_design_json"}
 _BASELINE_FIELDS = [f.name for f in fields(BaselineRow) if f.name != "run_ids"]
+_BASELINE_COLUMNS = [_BASELINE_JSON.get(n, n) for n in _BASELINE_FIELDS]
 _ANCHOR_JSON = {"input": "input_json"}
 _ANCHOR_FIELDS = [f.name for f in fields(AnchorRow)]
 _ANCHOR_COLUMNS = [_ANCHOR_JSON.get(n, n) for n in _ANCHOR_FIELDS]
@@ -95,7 +97,7 @@ _EVALUATION_COLUMNS = [_EVALUATION_JSON.get(n, n) for n in _EVALUATION_FIELDS]
 #: Every table's columns as this module reads and writes them.
 COLUMNS = {
     "runs": _RUN_COLUMNS,
-    "baselines": _BASELINE_FIELDS,
+    "baselines": _BASELINE_COLUMNS,
     "baseline_runs": ["baseline_id", "run_id"],
     "anchors": _ANCHOR_COLUMNS,
     "evaluations": _EVALUATION_COLUMNS,
@@ -486,11 +488,11 @@ class History:
             values = {n: getattr(row, n) for n in _BASELINE_FIELDS} | derived
             if values["created_at_ns"] is None:
                 values["created_at_ns"] = now_ns()
-            columns = _BASELINE_FIELDS[1:]
+            values["alarm_design"] = canonical_json(row.alarm_design, "BaselineRow.alarm_design")
             baseline_id = self._conn.query(
-                f"INSERT INTO baselines ({', '.join(columns)}) VALUES ({_marks(len(columns))}) "
-                "RETURNING id",
-                [values[c] for c in columns],
+                f"INSERT INTO baselines ({', '.join(_BASELINE_COLUMNS[1:])}) "
+                f"VALUES ({_marks(len(_BASELINE_COLUMNS) - 1)}) RETURNING id",
+                [values[n] for n in _BASELINE_FIELDS[1:]],
             )[0][0]
             for run_id in row.run_ids:
                 self._conn.execute(
@@ -503,13 +505,14 @@ class History:
     def _select_baselines(self, where, params):
         with self._read():
             rows = self._conn.query(
-                f"SELECT {', '.join(_BASELINE_FIELDS)} FROM baselines WHERE {where} ORDER BY id",
+                f"SELECT {', '.join(_BASELINE_COLUMNS)} FROM baselines WHERE {where} ORDER BY id",
                 params,
             )
             out = []
             for values in rows:
                 kw = dict(zip(_BASELINE_FIELDS, values, strict=True))
                 kw["stale"] = bool(kw["stale"])
+                kw["alarm_design"] = json.loads(kw["alarm_design"])
                 kw["run_ids"] = tuple(
                     r[0]
                     for r in self._conn.query(
@@ -569,6 +572,23 @@ class History:
             if not changed:
                 self._require("baselines", baseline_id, "baseline")
         return bool(changed)
+
+    def set_alarm_design(self, baseline_id, design):
+        """Keep a baseline's alarm design (computed once, read every night).
+
+        Parameters
+        ----------
+        baseline_id : int
+            The baseline.
+        design : dict
+            :meth:`~imu_square.monitor.alarms.AlarmDesign.to_json_dict`.
+        """
+        text = canonical_json(design, "alarm design")
+        with self._write():
+            if not self._conn.execute(
+                "UPDATE baselines SET alarm_design_json = ? WHERE id = ?", (text, baseline_id)
+            ):
+                self._require("baselines", baseline_id, "baseline")
 
     def _require(self, table, row_id, what):
         if not self._conn.query(f"SELECT 1 FROM {table} WHERE id = ?", (row_id,)):
