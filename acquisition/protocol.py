@@ -235,6 +235,11 @@ class Parser:
         self._in_error = False
         self._require_checksum = False
 
+    @property
+    def buffered_bytes(self):
+        """Bytes fed but not parsed yet: the start of a frame or line awaiting its end. [B]"""
+        return len(self._buf)
+
     def feed(self, data):
         """Parse more bytes.
 

@@ -30,6 +30,18 @@ class AcquisitionError(ImuSquareError):
     """The serial link or the device misbehaved in a way the recorder cannot absorb."""
 
 
+class OutputError(ImuSquareError):
+    """An output file cannot be written where asked (no such folder, a directory, no room)."""
+
+
+class OutputWriteError(OutputError):
+    """Writing an output file failed part-way (disk full, I/O error).
+
+    What was flushed before the failure stays in the file; the CLI exits with
+    its own code (4) so a script can tell this from a user's mistake.
+    """
+
+
 class ImuSquareWarning(UserWarning):
     """A recoverable oddity: the result is still produced, but say so."""
 

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 import pytest
-from acq_board import running_board, write_inputs
+from acq_board import make_pty, running_board, write_inputs
 
 from acquisition.faults import FaultInjector, FaultPlan, parse_faults
 from acquisition.progress import ProgressPrinter
@@ -160,16 +160,6 @@ def test_stream_unwraps_counts_gaps_and_drops_stale_blocks():
 
 
 # -- reader ------------------------------------------------------------------------------------
-
-
-def make_pty(link):
-    master, slave = os.openpty()
-    name = os.ttyname(slave)
-    os.close(slave)
-    tmp = link.with_name("tmp-link")
-    os.symlink(name, tmp)
-    os.replace(tmp, link)
-    return master
 
 
 def wait_for(q, kind, timeout=5.0):
