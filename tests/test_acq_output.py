@@ -20,7 +20,7 @@ import pytest
 from acq_board import assert_exact, running_board, write_inputs
 
 from imu_square.cli import main
-from imu_square.io.mcap import read_mcap, scan_mcap
+from imu_square.io.mcap import RecordingWriter, read_mcap, scan_mcap
 
 SCRIPT = os.path.join(os.path.dirname(sys.executable), "imu-square")
 
@@ -163,6 +163,27 @@ def test_a_full_disk_mid_run_keeps_the_flushed_chunks_and_says_how_much(tmp_path
     rec = read_mcap(fixed)
     assert_exact(rec, board)
     assert rec.n_samples == kept.samples and rec.lost_samples == 0
+
+
+def test_recover_onto_a_full_disk_removes_its_partial_output(tmp_path):
+    n = 30_000  # about 0.5 MB; the limit lets half of its rewrite through
+    t = np.arange(n) * 1_000_000
+    accel = np.random.default_rng(0).normal(0.0, 0.01, (n, 3))
+    src = tmp_path / "run.mcap"
+    with RecordingWriter(src, dt_ns=1_000_000) as writer:
+        writer.write_samples(np.arange(n), t, accel)
+    out = tmp_path / "fixed.mcap"
+    proc = subprocess.run(
+        [SCRIPT, "recover", str(src), "-o", str(out)],
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=60,
+        preexec_fn=limit_file_size(os.path.getsize(src) // 2),
+    )
+    assert proc.returncode == 4, proc.stderr
+    line = one_line(proc.stderr)
+    assert f"{out}: writing failed: File too large; the partial file was removed" in line
+    assert not out.exists()
 
 
 def mount_namespace():
