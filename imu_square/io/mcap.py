@@ -386,15 +386,18 @@ class RecordingWriter:
         """Finish the file (summary and indexes) and close it; idempotent."""
         if self._closed:
             return
-        with self._writing():
-            if self._pending is not None:
-                self._pending = self._write_batches(*self._pending, final=True)
-            self._writer.finish()
-            self._stream.flush()
-            self._sync()
-            self._closed = True
-            if self._owns:
-                self._stream.close()
+        try:
+            with self._writing():
+                if self._pending is not None:
+                    self._pending = self._write_batches(*self._pending, final=True)
+                self._writer.finish()
+                self._stream.flush()
+                self._sync()
+        finally:
+            if not self._closed:  # not already closed by a write failure
+                self._closed = True
+                if self._owns:
+                    self._stream.close()
 
     @contextmanager
     def _writing(self):
