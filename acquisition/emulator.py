@@ -14,10 +14,12 @@ The slave end of the pty is symlinked at a stable path (like
 ``/dev/serial/by-id/...``); an unplugging removes the link and closes the pty,
 and the board comes back on a new pty behind the same link. Faults come from
 :mod:`acquisition.faults`; every frame's fate is logged in a
-:class:`~acquisition.faults.FaultLog`. Before a planned unplugging the board
-waits until the host has read everything, so the log is exact; when the host
-itself closes the port, the bytes still in the pty at that moment are logged
-as sent but never read.
+:class:`~acquisition.faults.FaultLog`, settled by a
+:class:`~acquisition.faults.ReadBack` that parses the bytes as they go on the
+wire, so a frame is logged as sent exactly when a host's parser gets it
+intact. Before a planned unplugging the board waits until the host has read
+everything, so the log is exact; when the host itself closes the port, the
+bytes still in the pty at that moment are logged as sent but never read.
 """
 
 import fcntl
@@ -34,7 +36,15 @@ from pathlib import Path
 
 import numpy as np
 
-from acquisition.faults import DAMAGED, NO_HOST, OVERFLOW, SENT, FaultInjector, FaultPlan
+from acquisition.faults import (
+    DAMAGED,
+    NO_HOST,
+    OVERFLOW,
+    SENT,
+    FaultInjector,
+    FaultPlan,
+    ReadBack,
+)
 from acquisition.protocol import (
     INT24_MAX,
     INT24_MIN,
@@ -176,6 +186,7 @@ class EmulatedBoard:
         self._rng = np.random.default_rng(seed)
         self._injector = FaultInjector(self.faults, len(self.counts), self._rng)
         self.log = self._injector.log
+        self._readback = ReadBack(self.log, mode)
         self._markers = self._marker_schedule(recording)
         self._disconnects = [
             (round(at / (recording.dt_ns * 1e-9)), max(1, round(length / (recording.dt_ns * 1e-9))))
@@ -276,11 +287,18 @@ class EmulatedBoard:
             self._stream()
         finally:
             self._unplug()
+            self._readback.finish()
         return self.log
 
     def _stream(self):
-        n = len(self.counts)
         tx = _TxBuffer()
+        try:
+            self._stream_into(tx)
+        finally:  # what never left the board's buffer never reached the host
+            self._refate(tx.clear(), NO_HOST)
+
+    def _stream_into(self, tx):
+        n = len(self.counts)
         connected_at = None  # monotonic time the current host opened the port
         streaming = False
         t0 = None  # monotonic time of sample 0
@@ -302,11 +320,12 @@ class EmulatedBoard:
                 if connected_at is not None and not streaming:
                     if REQUEST_HEADER[:1] in data or now - connected_at >= HOST_GRACE_S:
                         streaming = True
-                        tx.add(encode_header(self.header))
+                        self._readback.restart()  # the host starts a fresh parser too
+                        self._send(tx, encode_header(self.header))
                         if t0 is None:
                             t0 = now
                 elif streaming and REQUEST_HEADER[:1] in data:
-                    tx.add(encode_header(self.header))
+                    self._send(tx, encode_header(self.header))
             if t0 is None:
                 time.sleep(_POLL_S)
                 continue
@@ -332,7 +351,7 @@ class EmulatedBoard:
                 if stop > due and due < n:
                     break
                 if stop - 1 >= next_header and streaming:
-                    tx.add(encode_header(self.header))
+                    self._send(tx, encode_header(self.header))
                     next_header = index + round(HEADER_INTERVAL_S * 1e9 / self.header.dt_ns)
                 self._frame(index, stop, streaming, tx)
                 if streaming and lost_run is not None:
@@ -342,7 +361,7 @@ class EmulatedBoard:
                     at, text = self._markers[marker_i]
                     if streaming:
                         raw = int(self.seq[at]) % SEQ_MODULUS
-                        tx.add(encode_marker(Marker(raw, text), self.mode))
+                        self._send(tx, encode_marker(Marker(raw, text), self.mode))
                     marker_i += 1
                 index = stop
             self._write(tx)
@@ -357,17 +376,25 @@ class EmulatedBoard:
             return
         garbage = self._injector.garbage_before(start, seq0)
         if garbage:
-            tx.add(garbage)
+            self._send(tx, garbage)
         block = SampleBlock(seq0 % SEQ_MODULUS, self.counts[start:stop])
         data = encode_block(block, self.mode)
         pieces = [data] if self.mode == "binary" else data.splitlines(keepends=True)
+        n_here = stop - start if self.mode == "binary" else 1
         for k, piece in enumerate(pieces):
             wire, damaged = self._injector.damage(piece, delimited=self.mode == "binary")
-            n_here = stop - start if self.mode == "binary" else 1
             entry = len(self.log.seq0)
             self.log.add_frame(seq0 + k, n_here, DAMAGED if damaged else SENT)
-            if not tx.add(wire, entry):
+            counts = self.counts[start + k : start + k + n_here]
+            if not self._send(tx, wire, entry, seq0 + k, counts):
                 self.log.fate[entry] = OVERFLOW
+
+    def _send(self, tx, data, entry=None, seq0=None, counts=None):
+        """Queue bytes for the host and let the read-back parse them; False if refused."""
+        if not tx.add(data, entry):
+            return False
+        self._readback.feed(data, entry, seq0, counts)
+        return True
 
     def _refate(self, entries, fate):
         for entry in entries:

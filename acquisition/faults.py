@@ -19,23 +19,32 @@ from the emulator. A fault specification is a comma-separated list, e.g.
 
 The :class:`FaultLog` records, frame by frame, what was sent intact, what was
 damaged and what never left the board, so tests can check the recorder's
-accounting exactly.
+accounting exactly. Damage reaches beyond the frame it hits: in line mode a
+lost newline merges a line with the next, and a garbage burst glues itself to
+the start of the next line; in binary mode a frame that loses its closing
+delimiter while the next loses its opening one merges with it. So the log is
+made exact by construction: :class:`ReadBack` parses the very bytes the board
+puts on the wire with the recorder's own :class:`~acquisition.protocol.Parser`
+and marks each frame by what came out of it.
 """
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from acquisition.protocol import SEQ_MODULUS, Parser, SampleBlock
 from imu_square.errors import ConfigError
 
 GARBAGE_BYTES = (16, 256)
 
 # What became of a frame's samples (FaultLog.fate codes).
-SENT = 0  # written intact
-DAMAGED = 1  # written with corrupted or dropped bytes
+SENT = 0  # arrives intact: a parser reading the wire returns it unchanged
+DAMAGED = 1  # written with corrupted or dropped bytes, and rejected
 NO_HOST = 2  # produced while no host had the port open (unplugged, not yet opened)
 OVERFLOW = 3  # the board's transmit buffer was full (the host did not read fast enough)
-FATES = ("sent", "damaged", "no_host", "overflow")
+SWALLOWED = 4  # written intact, but lost with a neighbour's damage (merged, garbage glued on)
+FATES = ("sent", "damaged", "no_host", "overflow", "swallowed")
 
 
 @dataclass(frozen=True)
@@ -158,14 +167,19 @@ class FaultLog:
     n : list of int
         Samples in each frame.
     fate : list of int
-        :data:`SENT`, :data:`DAMAGED`, :data:`NO_HOST` or :data:`OVERFLOW` for
-        each frame.
+        :data:`SENT`, :data:`DAMAGED`, :data:`NO_HOST`, :data:`OVERFLOW` or
+        :data:`SWALLOWED` for each frame.
     bytes_corrupted, bytes_dropped : int
         Bytes changed and left out over the run.
     garbage_bursts : list of (int, int)
         ``(before_seq, n_bytes)`` of each burst of random bytes.
     disconnects : list of (int, int)
         ``(first_seq_lost, n_lost)`` of each unplugging, as seen by the board.
+    undetected : list of (int, int)
+        ``(raw seq0, n)`` of each block a parser reading the wire accepted
+        although it differs from every frame sent: damage the CRC missed
+        (2**-32 per damaged frame, 2**-16 per damaged line). Empty in any
+        run a test relies on.
     """
 
     seq0: list = field(default_factory=list)
@@ -175,6 +189,7 @@ class FaultLog:
     bytes_dropped: int = 0
     garbage_bursts: list = field(default_factory=list)
     disconnects: list = field(default_factory=list)
+    undetected: list = field(default_factory=list)
 
     def add_frame(self, seq0, n, fate):
         """Record one frame of ``n`` samples from ``seq0`` and what became of it."""
@@ -188,7 +203,8 @@ class FaultLog:
         Parameters
         ----------
         fate : int
-            One of :data:`SENT`, :data:`DAMAGED`, :data:`NO_HOST`, :data:`OVERFLOW`.
+            One of :data:`SENT`, :data:`DAMAGED`, :data:`NO_HOST`, :data:`OVERFLOW`,
+            :data:`SWALLOWED`.
 
         Returns
         -------
@@ -214,6 +230,7 @@ class FaultLog:
             garbage_bursts=len(self.garbage_bursts),
             garbage_bytes=int(sum(b for _, b in self.garbage_bursts)),
             disconnects=[list(d) for d in self.disconnects],
+            undetected=[list(u) for u in self.undetected],
         )
         return out
 
@@ -304,3 +321,88 @@ class FaultInjector:
         if delimited:
             drop[[0, -1]] = False
         return data.tobytes(), bool(n_corrupt or drop.any())
+
+
+class ReadBack:
+    """Marks every frame by what a parser reading the board's wire gets from it.
+
+    The board feeds it each byte string it queues for the host, in order, and
+    calls :meth:`restart` whenever a host connection starts (the recorder then
+    starts a fresh parser too). A frame is settled once the parser has read
+    past its last byte: :data:`SENT` if the parser returned its samples
+    unchanged; otherwise :data:`DAMAGED` if its own bytes were damaged, or
+    :data:`SWALLOWED` if they were intact. A frame already marked
+    :data:`NO_HOST` or :data:`OVERFLOW` (its bytes never reached a host)
+    keeps that mark.
+
+    Parameters
+    ----------
+    log : FaultLog
+        The log whose ``fate`` entries are settled.
+    mode : {"binary", "line"}
+        Wire mode.
+    """
+
+    def __init__(self, log, mode):
+        self.log = log
+        self.mode = mode
+        self._parser = Parser(mode)
+        self._fed = 0
+        self._open = deque()  # (end offset in the stream, log entry, raw seq0), in order
+        self._expected = {}  # raw seq0 -> (log entry, counts sent)
+
+    def restart(self):
+        """A new host connection: what the old parser still held can never arrive."""
+        self._settle(everything=True)
+        self._parser = Parser(self.mode)
+        self._fed = 0
+
+    def feed(self, data, entry=None, seq0=None, counts=None):
+        """Parse the next bytes on the wire.
+
+        Parameters
+        ----------
+        data : bytes
+            Bytes as queued for the host (damaged already).
+        entry : int, optional
+            Log entry of the frame these bytes carry; None for a header, a
+            marker or garbage.
+        seq0 : int, optional
+            Unwrapped sequence number of the frame's first sample.
+        counts : ndarray of int32, shape (n, 3), optional
+            The samples the frame was made from. [counts]
+        """
+        if entry is not None:
+            raw = int(seq0) % SEQ_MODULUS
+            self._expected[raw] = (entry, counts)
+            self._open.append((self._fed + len(data), entry, raw))
+        self._fed += len(data)
+        for message in self._parser.feed(data):
+            if isinstance(message, SampleBlock):
+                self._received(message)
+        self._settle()
+
+    def finish(self):
+        """The board stopped: settle what is left unterminated."""
+        self._settle(everything=True)
+
+    def _received(self, block):
+        hit = self._expected.pop(block.seq0, None)
+        if hit is None or not np.array_equal(block.counts, hit[1]):
+            self.log.undetected.append((int(block.seq0), int(block.n_samples)))
+            if hit is not None:
+                self._expected[block.seq0] = hit  # not the frame sent: still unreceived
+            return
+        if self.log.fate[hit[0]] in (SENT, DAMAGED):
+            self.log.fate[hit[0]] = SENT
+
+    def _settle(self, everything=False):
+        consumed = self._fed - self._parser.buffered_bytes
+        while self._open and (everything or self._open[0][0] <= consumed):
+            _, entry, raw = self._open.popleft()
+            hit = self._expected.get(raw)
+            if hit is None or hit[0] != entry:
+                continue  # received
+            del self._expected[raw]
+            if self.log.fate[entry] == SENT:
+                self.log.fate[entry] = SWALLOWED

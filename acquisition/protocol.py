@@ -235,6 +235,11 @@ class Parser:
         self._in_error = False
         self._require_checksum = False
 
+    @property
+    def buffered_bytes(self):
+        """Bytes fed but not parsed yet: the start of a frame or line awaiting its end. [B]"""
+        return len(self._buf)
+
     def feed(self, data):
         """Parse more bytes.
 
@@ -346,9 +351,13 @@ class Parser:
             start = end + 1
         start = 0
         while (end := buf.find(b"\n", start)) >= 0 and (best is None or end < best[0]):
-            line = buf[start:end]
+            # A 0x00 never belongs to a text line: a header line starts after the last one,
+            # wherever the stream was split (a split feed drops bytes up to a 0x00 early).
+            nul = buf.rfind(b"\x00", start, end)
+            first = start if nul < 0 else nul + 1
+            line = buf[first:end]
             if len(line) <= MAX_LINE and parse_header_line(line) is not None:
-                best = (end, start, "line")
+                best = (end, first, "line")
                 break
             start = end + 1
         if best is None:

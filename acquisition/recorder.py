@@ -9,7 +9,22 @@ events to a :class:`~imu_square.io.mcap.RecordingWriter`, which it flushes
 (chunk closed, fsync) every second, so a kill or a power cut loses at most
 the last second. A bad sample is never written or interpolated: damaged
 frames are dropped by the parser, counted, and leave a ``gap`` event with the
-number of samples lost.
+number of samples lost (``lost=N,lost_s=T``).
+
+A board that goes away for good never makes a clean run. When no sample has
+arrived for ``silence_timeout_s`` (the port stayed lost, or the board hung),
+or when the planned stop passes while the board is silent, the recorder
+stops with ``stop_reason`` ``"port lost"`` or ``"board silent"`` and writes
+the missing tail as a ``gap`` event after the last sample
+(``lost=N,lost_s=T,cause=...``), up to the sample at which it stopped: the
+planned stop, or the board's sample at the moment it gave up, estimated from
+the host clock.
+
+The output path is checked before the port is opened and the disk's free
+space as soon as the board's header gives the sample rate, both before the
+trigger: a machine's run is never lost to a path that cannot be written. A
+write that fails part-way (disk full) stops the recording and raises
+:class:`~imu_square.errors.OutputWriteError` saying how much the file kept.
 """
 
 import collections
@@ -32,9 +47,11 @@ from acquisition.protocol import (
 from acquisition.reader import SerialSupervisor
 from acquisition.stream import SampleStream
 from acquisition.trigger import make_trigger
-from imu_square.errors import AcquisitionError
-from imu_square.io.mcap import RecordingWriter
+from imu_square.errors import AcquisitionError, ImuSquareError, OutputError, OutputWriteError
+from imu_square.io.mcap import RecordingWriter, scan_mcap
+from imu_square.io.output import check_free_space, check_output_path
 from imu_square.io.recording import Event, SensorInfo
+from imu_square.io.runlog import parse_detail, run_is_complete, run_problems
 from imu_square.log import logger
 
 HEADER_TIMEOUT_S = 5.0
@@ -43,7 +60,28 @@ FLUSH_INTERVAL_S = 1.0
 PRETRIGGER_S = 3.0
 CHUNK_SIZE = 64 * 1024
 MARKER_MARGIN_S = 2.0
-SILENCE_S = 2.0  # host time without data after which board time is extrapolated [s]
+SILENCE_S = 2.0  # host time without samples after which board time is extrapolated [s]
+SILENCE_TIMEOUT_S = 10.0  # host time without samples after which the board is given up [s]
+RATE_SPAN_S = 0.5  # host time of samples needed to measure the board's rate [s]
+# Upper bound of the file's size per sample: the uncompressed chunks hold 20 B per sample
+# at 1 kHz (24 B with a temperature; 14-18 B at 4 kHz) and zstd gives ~16 B on noisy data.
+MAX_BYTES_PER_SAMPLE = 25
+FILE_OVERHEAD_BYTES = 1e6  # attachments, metadata, summary and indexes, with room to spare
+
+
+def _check_seconds(name, value, *, allow_none=False, allow_zero=False):
+    """Refuse a time that is not a finite number of seconds above 0 (or 0 when allowed)."""
+    if value is None and allow_none:
+        return
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if not (number and math.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
+        bound = ">= 0" if allow_zero else "> 0"
+        raise AcquisitionError(f"{name} must be a number of seconds {bound}, got {value!r}")
+
+
+def _identity(header):
+    """What must not change within one recording: which board, its time base and scale."""
+    return (header.model, header.serial, header.dt_ns, header.scale_m_s2_per_count)
 
 
 def until_done_margin_s(program):
@@ -112,8 +150,12 @@ class RecorderStatus:
     elapsed_s : float
         Host time since the recorder started. [s]
     stop_reason : str
-        ``"duration"``, ``"done"``, ``"interrupted"``, ``"board restarted"``,
-        ``"error"``, or ``""`` while running.
+        ``"duration"`` or ``"done"`` (as planned), ``"interrupted"``, ``"port lost"``
+        (it stayed lost), ``"board silent"`` (no samples), ``"board restarted"``,
+        ``"error"``, ``"output error"`` (writing failed), or ``""`` while running.
+    lost_at_end : int
+        Samples missing after the last one received, up to where the recorder
+        stopped, when the board went away (included in ``lost``).
     """
 
     state: str = "waiting for header"
@@ -129,16 +171,26 @@ class RecorderStatus:
     rate_hz: float = math.nan
     elapsed_s: float = 0.0
     stop_reason: str = ""
+    lost_at_end: int = 0
     header: DeviceHeader | None = field(default=None, repr=False)
 
     @property
     def complete(self):
         """True for a run that stopped as planned with nothing lost, rejected or reconnected."""
-        return (
-            self.stop_reason in ("duration", "done")
-            and self.lost == 0
-            and self.crc_errors == 0
-            and self.reconnects == 0
+        return run_is_complete(self.stop_reason, self.lost, self.crc_errors, self.reconnects)
+
+    @property
+    def problems(self):
+        """Why the run is incomplete, one phrase per reason (empty when complete)."""
+        dt_s = self.header.dt_ns * 1e-9 if self.header is not None else math.nan
+        return run_problems(
+            self.stop_reason,
+            self.lost,
+            self.crc_errors,
+            self.reconnects,
+            self.lost_at_end,
+            self.lost_at_end * dt_s,
+            self.stop_reason,
         )
 
 
@@ -175,6 +227,17 @@ class Recorder:
         Host time between progress calls. [s]
     header_timeout_s : float
         Give up if no header arrives within this host time after opening. [s]
+    silence_timeout_s : float
+        Give up on a board that sends no sample for this host time: the port
+        stayed lost or the board hung. Longer than any unplugging the run
+        should ride through. [s]
+    overwrite : bool
+        Replace an existing file at ``path`` (refused otherwise).
+
+    Raises
+    ------
+    AcquisitionError
+        On an option out of range, naming the option.
     """
 
     def __init__(
@@ -193,11 +256,19 @@ class Recorder:
         progress=None,
         progress_interval_s=0.5,
         header_timeout_s=HEADER_TIMEOUT_S,
+        silence_timeout_s=SILENCE_TIMEOUT_S,
+        overwrite=False,
     ):
         if until_done and program is None:
             raise AcquisitionError("until_done needs the test program (--program)")
-        if duration_s is not None and not duration_s > 0:
-            raise AcquisitionError(f"duration_s must be > 0, got {duration_s!r}")
+        if isinstance(baudrate, bool) or not isinstance(baudrate, int) or baudrate <= 0:
+            raise AcquisitionError(
+                f"baud rate (--baud) must be a whole number > 0, got {baudrate!r}"
+            )
+        _check_seconds("duration (--duration)", duration_s, allow_none=True)
+        _check_seconds("header timeout (--header-timeout)", header_timeout_s)
+        _check_seconds("silence timeout (--silence-timeout)", silence_timeout_s)
+        _check_seconds("pre-trigger time (--pretrigger)", pretrigger_s, allow_zero=True)
         self.path = path
         self.port = port
         self.baudrate = baudrate
@@ -211,6 +282,8 @@ class Recorder:
         self.progress = progress
         self.progress_interval_s = progress_interval_s
         self.header_timeout_s = header_timeout_s
+        self.silence_timeout_s = silence_timeout_s
+        self.overwrite = overwrite
         self.status = RecorderStatus()
         self._stop = threading.Event()
         self._queue = queue.Queue()
@@ -232,10 +305,17 @@ class Recorder:
 
         Raises
         ------
+        OutputError
+            Before the port is opened, when the output cannot be written there
+            (or exists, without ``overwrite``); before the trigger, when the
+            disk cannot hold the recording.
         AcquisitionError
-            When the port cannot be opened, the board sends no header, or its
-            header changes mid-run (the file is finished first).
+            When the port cannot be opened, or the board sends no header.
+        OutputWriteError
+            When writing failed part-way (disk full); the message says how
+            much the file kept.
         """
+        check_output_path(self.path, overwrite=self.overwrite)
         self._t0 = time.monotonic()
         self._parser = None
         self._stream = None
@@ -255,17 +335,24 @@ class Recorder:
         self._seq_first = None
         self._last_written = None
         self._t_start_ns = None
+        self._alive = None  # [(host s, seq) of the first, of the last samples received]
+        self._silent_since = None  # host time of the last sample (or the first header) [s]
+        self._tail = None  # (end seq, cause) of the missing tail when the board went away
+        self._header_seen = False  # a header from our board arrived on this connection
+        self._output_failure = None
         self._supervisor.start()
         try:
             self._loop()
         except KeyboardInterrupt:
             self.status.stop_reason = "interrupted"
-        except AcquisitionError:
+        except (AcquisitionError, OutputError):
             self.status.stop_reason = "error"
             raise
         finally:
             self._supervisor.stop()
             self._finish()
+        if self._output_failure is not None:
+            raise self._what_was_kept(self._output_failure)
         return self.status
 
     def _loop(self):
@@ -287,12 +374,12 @@ class Recorder:
                     self._supervisor.write(REQUEST_HEADER)
                     next_request = now + HEADER_RETRY_S
             if self._writer is not None and now >= next_flush:
-                self._writer.flush()
+                self._output(self._writer.flush)
                 next_flush = now + FLUSH_INTERVAL_S
             if self.progress is not None and now >= next_progress:
                 self.progress(self.status)
                 next_progress = now + self.progress_interval_s
-            self._check_stop_while_silent()
+            self._check_silence(now)
             try:
                 kind, payload, host_ns = self._queue.get(timeout=0.1)
             except queue.Empty:
@@ -309,6 +396,7 @@ class Recorder:
     # -- link and parser -------------------------------------------------------------------
 
     def _on_connect(self, host_ns):
+        self._header_seen = False
         header = self.status.header
         self._parser = Parser(self.mode or (header.mode if header is not None else None))
         self._supervisor.write(REQUEST_HEADER)
@@ -324,6 +412,7 @@ class Recorder:
         self._last_data = host_ns
         stats = self._parser.stats
         errors, resyncs = stats.errors, stats.resyncs
+        samples = stats.samples_ok
         messages = self._parser.feed(data)
         if stats.errors > errors:
             self._parser_events.append(("crc_error", f"count={stats.errors - errors}"))
@@ -331,6 +420,8 @@ class Recorder:
             self.status.resyncs += stats.resyncs - resyncs
         run = []  # consecutive sample blocks, handled as one
         for message in messages:
+            if self.status.stop_reason:
+                return
             if isinstance(message, SampleBlock):
                 if run and (run[-1].seq0 + run[-1].n_samples) % SEQ_MODULUS != message.seq0:
                     self._on_samples(run)
@@ -344,12 +435,26 @@ class Recorder:
                 self._on_marker(message)
             else:
                 self._on_header(message)
-        if run:
+        if run and not self.status.stop_reason:
             self._on_samples(run)
+        if stats.samples_ok > samples and self._header_seen:
+            self._note_samples(host_ns * 1e-9)
+
+    def _note_samples(self, host_s):
+        """Samples arrived at ``host_s``: the board is alive, and its rate can be measured."""
+        seq = self._stream.last_seq
+        if seq is None:
+            return
+        if self._alive is None:
+            self._alive = [(host_s, seq), (host_s, seq)]
+        self._alive[1] = (host_s, seq)
+        self._silent_since = host_s
 
     def _on_header(self, header):
         old = self.status.header
         if old is None:
+            self._silent_since = time.monotonic()
+            self._check_space(header)
             self.status.header = header
             self.status.state = "waiting for trigger"
             self._stream = SampleStream(header.scale_m_s2_per_count)
@@ -364,16 +469,22 @@ class Recorder:
                 header.sample_rate_hz,
                 header.mode,
             )
-        elif (old.dt_ns, old.scale_m_s2_per_count) != (header.dt_ns, header.scale_m_s2_per_count):
-            raise AcquisitionError(
-                f"the board on {self.port!r} changed its header mid-run (dt_ns {old.dt_ns} -> "
-                f"{header.dt_ns}, scale {old.scale_m_s2_per_count!r} -> "
-                f"{header.scale_m_s2_per_count!r}); the file ends there"
+        elif _identity(old) != _identity(header):
+            logger.warning(
+                "the board on %s is not the one the recording started with (model, serial, "
+                "dt_ns, scale: %s -> %s): a reused port name, or the board was reconfigured; "
+                "the recording stops here",
+                self.port,
+                _identity(old),
+                _identity(header),
             )
+            self._board_gone(self._board_at(time.monotonic() - self._silent_since), "board changed")
+            return
+        self._header_seen = True
 
     def _on_samples(self, blocks):
-        if self._stream is None:
-            return  # before the first header the scale is unknown
+        if not self._header_seen:
+            return  # before a header on this connection: which board, at what scale?
         if len(blocks) == 1:
             counts = blocks[0].counts
             temperature = np.full(blocks[0].n_samples, blocks[0].temperature_c)
@@ -391,7 +502,7 @@ class Recorder:
             return
         s0 = int(seq[0])
         if lost:
-            self._queue_event(s0, "gap", detail=f"lost={lost}")
+            self._queue_event(s0, "gap", detail=self._gap_detail(lost))
         if self._reconnect_detail is not None:
             self._queue_event(s0, "reconnect", detail=self._reconnect_detail)
             self._reconnect_detail = None
@@ -426,7 +537,7 @@ class Recorder:
         self.status.stop_reason = "board restarted"
 
     def _on_marker(self, marker):
-        if self._stream is None or self._stream.last_seq is None:
+        if not self._header_seen or self._stream.last_seq is None:
             return
         seq = self._stream.unwrap(marker.seq)
         kind, direction, block, detail = parse_block_marker(marker.text)
@@ -454,8 +565,12 @@ class Recorder:
         while self._pending and self._pending[0][0] < keep_from:
             self._pending.popleft()
 
-    def _start(self, trigger_seq):
-        """Open the file at the trigger, keeping ``pretrigger_s`` of what came before."""
+    def _start(self, trigger_seq, fired=True):
+        """Open the file at the trigger, keeping ``pretrigger_s`` of what came before.
+
+        ``fired=False``: the recorder stopped while waiting for the trigger, and
+        the file keeps the buffer up to ``trigger_seq``, with no stop condition.
+        """
         dt = self.status.header.dt_ns
         self._trigger_seq = trigger_seq
         self.status.state = "recording"
@@ -468,13 +583,16 @@ class Recorder:
         else:  # a marker announced the start before its samples arrived
             self._seq_first = trigger_seq
             self._t_start_ns = time.time_ns()
-        self._queue_event(trigger_seq, "run_start", detail=f"trigger={self.trigger_kind}")
+        detail = f"trigger={self.trigger_kind}" + ("" if fired else ",fired=no")
+        self._queue_event(trigger_seq, "run_start", detail=detail)
         self._pending = collections.deque(
             sorted(
                 (item for item in self._pending if self._in_file(item)), key=lambda item: item[0]
             )
         )
         self._open_writer()
+        if not fired:
+            return
         if self.duration_s is not None:
             self._set_stop(trigger_seq + self._samples(self.duration_s), "duration")
         elif self.until_done:
@@ -509,7 +627,7 @@ class Recorder:
             return
         limit = self._stop_seq if self._stop_seq is not None else np.iinfo(np.int64).max
         with_temperature = self.status.header.has_temperature
-        while self._pending:
+        while self._pending and self._output_failure is None:
             seq0, kind, payload = self._pending.popleft()
             if seq0 >= limit:
                 self._reached_stop()
@@ -521,10 +639,10 @@ class Recorder:
             keep = (seq >= self._seq_first) & (seq < limit)
             if not keep.all():
                 seq, accel, temperature = seq[keep], accel[keep], temperature[keep]
-            if seq.size:
-                self._writer.write_samples(
-                    seq, self._time_ns(seq), accel, temperature if with_temperature else None
-                )
+            temperature = temperature if with_temperature else None
+            if seq.size and self._output(
+                self._writer.write_samples, seq, self._time_ns(seq), accel, temperature
+            ):
                 self._last_written = int(seq[-1])
                 self.status.samples_written += seq.size
                 self.status.recorded_s = (
@@ -539,29 +657,127 @@ class Recorder:
         self._pending.clear()
 
     def _write_event(self, seq, kind, direction, block, detail):
-        if kind == "gap":
-            self.status.gaps += 1
-            self.status.lost += int(detail.partition("=")[2])
-        elif kind == "crc_error":
-            self.status.crc_errors += int(detail.partition("=")[2])
-        elif kind == "reconnect":
-            self.status.reconnects += 1
-        self._writer.write_event(Event(self._time_ns(seq), kind, direction, block, detail))
-
-    def _check_stop_while_silent(self):
-        """Stop on time when the board falls silent, estimating its clock from the host's."""
-        if (
-            self._stop_seq is None
-            or self._last_data is None
-            or not self.status.rate_hz > 0
-            or not self._queue.empty()
+        if not self._output(
+            self._writer.write_event, Event(self._time_ns(seq), kind, direction, block, detail)
         ):
             return
-        silent_s = (time.monotonic_ns() - self._last_data) * 1e-9
-        if silent_s > SILENCE_S and self._stream.last_seq + silent_s * self.status.rate_hz >= (
-            self._stop_seq
-        ):
-            self._reached_stop()
+        if kind == "gap":
+            self.status.gaps += 1
+            self.status.lost += int(parse_detail(detail)["lost"])
+        elif kind == "crc_error":
+            self.status.crc_errors += int(parse_detail(detail)["count"])
+        elif kind == "reconnect":
+            self.status.reconnects += 1
+
+    def _gap_detail(self, lost):
+        return f"lost={lost},lost_s={lost * self.status.header.dt_ns * 1e-9:.3f}"
+
+    # -- a board that goes away ------------------------------------------------------------
+
+    def _board_rate(self):
+        """Board samples per host second: measured once samples span a while, else nominal.
+
+        Measured from the end of the first read, which may hold a backlog; the
+        nominal rate is the header's, right for any real board (an emulated one
+        may run faster than real time).
+        """
+        if self._alive is not None:
+            (t0, s0), (t1, s1) = self._alive
+            if t1 - t0 >= RATE_SPAN_S:
+                return (s1 - s0) / (t1 - t0)
+        return self.status.header.sample_rate_hz
+
+    def _check_silence(self, now):
+        """Stop when the board is gone: silent past the planned stop, or past the time-out.
+
+        While silent for more than ``SILENCE_S`` the board's sample counter is
+        estimated from the host clock; once it passes the planned stop, nothing
+        more can come in time. After ``silence_timeout_s`` the board is given up
+        at once. Either way what is missing up to there becomes the tail gap.
+        """
+        if self._silent_since is None or self.status.stop_reason or not self._queue.empty():
+            return
+        silent_s = now - self._silent_since
+        if silent_s <= min(SILENCE_S, self.silence_timeout_s):
+            return
+        board_at = self._board_at(silent_s)
+        at_stop = None not in (board_at, self._stop_seq) and board_at >= self._stop_seq
+        if silent_s <= self.silence_timeout_s and not at_stop:
+            return
+        cause = "port lost" if self._down_since is not None else "board silent"
+        logger.warning(
+            "no sample from the board on %s for %.1f s (%s): the recording stops, and the "
+            "missing time is recorded as a gap; the run is incomplete",
+            self.port,
+            silent_s,
+            "the port stayed lost" if cause == "port lost" else "the port is open but silent",
+        )
+        self._board_gone(board_at, cause)
+
+    def _board_at(self, silent_s):
+        """Next sample the board would send now, from the host clock; None before any."""
+        last = self._stream.last_seq if self._stream is not None else None
+        if last is None:
+            return None
+        return last + 1 + round(silent_s * self._board_rate())
+
+    def _board_gone(self, board_at, cause):
+        """Stop: what is missing up to ``board_at`` (or the planned stop) is the tail gap."""
+        if board_at is not None and self._stop_seq is not None:
+            board_at = min(board_at, self._stop_seq)
+        self._tail = None if board_at is None else (board_at, cause)
+        self.status.stop_reason = cause
+
+    def _write_tail(self):
+        """The gap from the last sample written to where the recorder stopped."""
+        end, cause = self._tail
+        first = self._last_written + 1 if self._last_written is not None else self._seq_first
+        lost = end - first
+        if lost > 0:
+            self._write_event(first, "gap", "", -1, f"{self._gap_detail(lost)},cause={cause}")
+            self.status.lost_at_end = lost
+
+    # -- the output file -------------------------------------------------------------------
+
+    def _check_space(self, header):
+        """Refuse, before the trigger, a disk that cannot hold the planned recording."""
+        if self.duration_s is not None:
+            span_s = self.duration_s
+        elif self.program is not None:
+            span_s = self.program.duration_s
+            if self.until_done:
+                span_s += until_done_margin_s(self.program)
+        else:
+            return  # open-ended, no program: nothing to go by
+        span_s += self.pretrigger_s
+        needed = span_s * header.sample_rate_hz * MAX_BYTES_PER_SAMPLE + FILE_OVERHEAD_BYTES
+        check_free_space(self.path, needed, f"{span_s:.0f} s at {header.sample_rate_hz:g} Hz")
+
+    def _output(self, method, *args):
+        """Call a writer method; on a failure keep it, stop recording and return False."""
+        if self._output_failure is not None:
+            return False
+        try:
+            method(*args)
+        except OutputError as exc:
+            self._output_failure = exc
+            self.status.stop_reason = "output error"
+            return False
+        return True
+
+    def _what_was_kept(self, failure):
+        """The output failure, with what the file kept when writing had started."""
+        if not isinstance(failure, OutputWriteError):
+            return failure
+        try:
+            kept = scan_mcap(self.path).report
+        except ImuSquareError:
+            return OutputWriteError(f"{failure}; nothing readable was kept")
+        return OutputWriteError(
+            f"{failure}; the file keeps {kept.samples} samples ({kept.duration_s:.3f} s) from "
+            f"the chunks flushed before: 'imu-square recover {self.path} -o FIXED.mcap' "
+            f"rewrites them as a whole file"
+        )
 
     def _open_writer(self):
         h = self.status.header
@@ -585,6 +801,10 @@ class Recorder:
             "time_base": "board sequence number: t_start_ns + (seq - seq_first) * dt_ns",
             "t_start_source": "host UTC clock at the arrival of the first block",
         }
+        self._output(self._create_writer, sensor, metadata)
+
+    def _create_writer(self, sensor, metadata):
+        h = self.status.header
         self._writer = RecordingWriter(
             self.path,
             dt_ns=h.dt_ns,
@@ -597,19 +817,27 @@ class Recorder:
         )
 
     def _finish(self):
+        if (
+            self._writer is None
+            and self.status.stop_reason not in ("error", "output error")
+            and self._stream is not None
+            and self._stream.last_seq is not None
+        ):
+            self._start(self._stream.last_seq, fired=False)  # stopped while waiting: keep it
         self.status.state = "stopped"
-        if self._writer is None and self._stream is not None and self._stream.last_seq is not None:
-            self._start(self._stream.last_seq)  # stopped while waiting: keep the buffer
         if self._writer is None:
             return
         self._drain()
+        if self._tail is not None:
+            self._write_tail()
         s = self.status
         end = self._last_written if self._last_written is not None else self._seq_first
+        end += s.lost_at_end  # where the recorder stopped: the end of a missing tail
         detail = (
             f"stop={s.stop_reason or 'interrupted'},samples={s.samples_written},lost={s.lost},"
             f"crc_errors={s.crc_errors},resyncs={s.resyncs},reconnects={s.reconnects},"
             f"stale_blocks={s.stale_blocks},host_rate_hz={s.rate_hz:.3f}"
         )
-        self._writer.write_event(Event(self._time_ns(end), "run_end", detail=detail))
-        self._writer.close()
+        self._output(self._writer.write_event, Event(self._time_ns(end), "run_end", detail=detail))
+        self._output(self._writer.close)
         self._writer = None

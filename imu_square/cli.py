@@ -9,6 +9,12 @@ code.
 
 Human-readable text goes to stderr; machine-readable results go to stdout.
 A user's mistake is one line on stderr and a non-zero exit, never a traceback.
+
+Exit codes shared by every command: 0 done; 2 a user's mistake (bad option,
+bad or missing input, an output that cannot be written), or a recording that
+cannot be analysed; 3 incomplete (a recording with missing data, a cut file;
+what there is remains valid); 4 writing an output failed part-way (disk full,
+I/O error), what was flushed before is kept; 130 interrupted.
 """
 
 import argparse
@@ -21,10 +27,12 @@ import warnings
 from importlib.metadata import entry_points
 
 from imu_square import __version__
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, OutputWriteError
 
 EXIT_OK = 0
 EXIT_USER_ERROR = 2
+EXIT_INCOMPLETE = 3
+EXIT_WRITE_FAILED = 4
 EXIT_INTERRUPTED = 130
 
 
@@ -43,6 +51,10 @@ def build_parser():
     parser = argparse.ArgumentParser(
         prog="imu-square",
         description="Machine-tool squareness from a table-mounted accelerometer.",
+        epilog="Exit codes: 0 done; 2 a user's mistake or an input that cannot be used, in "
+        "one line; 3 incomplete (a cut file, a recording with data missing: what there is "
+        "stays valid); 4 writing an output failed part-way (disk full); 130 interrupted. "
+        "Each command's --help says which apply.",
     )
     parser.add_argument("--version", action="version", version=f"imu-square {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more status output")
@@ -85,6 +97,9 @@ def main(argv=None):
         warnings.showwarning = _show_warning
         try:
             return int(args.func(args) or EXIT_OK)
+        except OutputWriteError as exc:
+            print(f"imu-square {args.command}: error: {exc}", file=sys.stderr)
+            return EXIT_WRITE_FAILED
         except ImuSquareError as exc:
             print(f"imu-square {args.command}: error: {exc}", file=sys.stderr)
             return EXIT_USER_ERROR

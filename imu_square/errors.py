@@ -42,6 +42,18 @@ class HistoryError(ImuSquareError):
     """The monitor's history cannot be opened, read or written as asked."""
 
 
+class OutputError(ImuSquareError):
+    """An output file cannot be written where asked (no such folder, a directory, no room)."""
+
+
+class OutputWriteError(OutputError):
+    """Writing an output file failed part-way (disk full, I/O error).
+
+    What was flushed before the failure stays in the file; the CLI exits with
+    its own code (4) so a script can tell this from a user's mistake.
+    """
+
+
 class ImuSquareWarning(UserWarning):
     """A recoverable oddity: the result is still produced, but say so."""
 

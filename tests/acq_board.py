@@ -1,12 +1,14 @@
 """Shared helpers of the acquisition tests: an emulated board in a thread, exact checks."""
 
+import os
 import threading
 from contextlib import contextmanager
 
 import numpy as np
 
 from acquisition.emulator import emulated_board
-from acquisition.faults import parse_faults
+from acquisition.faults import DAMAGED, SENT, SWALLOWED, parse_faults
+from imu_square.io.runlog import parse_detail
 from imu_square.program import program_from_mapping
 from imu_square.simulate import data_path, read_machine, read_sensor
 
@@ -78,3 +80,53 @@ def assert_exact(recording, board):
     expected_t = recording.time_ns[0] + (recording.seq - recording.seq[0]) * board.header.dt_ns
     np.testing.assert_array_equal(recording.time_ns, expected_t)
     assert recording.dt_ns == board.header.dt_ns
+
+
+def assert_accounted(recording, log):
+    """The file holds exactly what the board's log says arrived intact, and counts the rest.
+
+    Over the file's span, the samples stored are the samples the log marks as sent (no
+    more: nothing damaged slipped through; no fewer: nothing intact was dropped), and the
+    gap events add up to every other sample of the span. Every sample lost with intact
+    bytes of its own was swallowed by damage next to it: a damaged or swallowed
+    neighbour, or a garbage burst just before it or just after it.
+
+    Returns
+    -------
+    dict
+        Frames and samples per fate within the span, and the garbage bursts in it.
+    """
+    first, last = int(recording.seq[0]), int(recording.seq[-1])
+    sent = log.seqs(SENT)
+    np.testing.assert_array_equal(recording.seq, sent[(sent >= first) & (sent <= last)])
+    gaps = [e for e in recording.events if e.kind == "gap" and e.time_ns <= recording.time_ns[-1]]
+    lost = sum(int(parse_detail(e.detail)["lost"]) for e in gaps)
+    assert recording.n_samples == last - first + 1 - lost
+    assert log.undetected == []
+
+    seq0 = np.asarray(log.seq0)
+    fate = np.asarray(log.fate)
+    inside = (seq0 >= first) & (seq0 <= last)
+    bad = np.isin(fate, (DAMAGED, SWALLOWED))
+    garbage_before = {s for s, _ in log.garbage_bursts}
+    for j in np.flatnonzero(inside & (fate == SWALLOWED)):
+        neighbours = bad[max(j - 1, 0)] or (j + 1 < fate.size and bad[j + 1])
+        glued = seq0[j] in garbage_before or (j + 1 < seq0.size and seq0[j + 1] in garbage_before)
+        assert neighbours or glued, f"frame at {seq0[j]} lost with no damage next to it"
+    counts = {
+        name: int(np.sum(inside & (fate == code)))
+        for name, code in (("damaged", DAMAGED), ("swallowed", SWALLOWED))
+    }
+    counts["garbage"] = sum(first < s <= last for s, _ in log.garbage_bursts)
+    return counts
+
+
+def make_pty(link):
+    """A bare pty whose slave end is symlinked at ``link``; returns the master's descriptor."""
+    master, slave = os.openpty()
+    name = os.ttyname(slave)
+    os.close(slave)
+    tmp = link.with_name("tmp-link")
+    os.symlink(name, tmp)
+    os.replace(tmp, link)
+    return master

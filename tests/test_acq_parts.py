@@ -7,12 +7,22 @@ import queue
 import signal
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
-from acq_board import running_board, write_inputs
+from acq_board import make_pty, running_board, write_inputs
 
-from acquisition.faults import FaultInjector, FaultPlan, parse_faults
+from acquisition.faults import (
+    DAMAGED,
+    SENT,
+    SWALLOWED,
+    FaultInjector,
+    FaultLog,
+    FaultPlan,
+    ReadBack,
+    parse_faults,
+)
 from acquisition.progress import ProgressPrinter
 from acquisition.protocol import DeviceHeader, SampleBlock, encode_block, encode_header
 from acquisition.reader import SerialSupervisor
@@ -85,6 +95,78 @@ def test_garbage_bursts_are_spread_over_the_run_and_logged():
     assert len(inj.log.garbage_bursts) == 5
     assert len(total) == sum(n for _, n in inj.log.garbage_bursts)
     assert all(16 <= n <= 256 for _, n in inj.log.garbage_bursts)
+
+
+READBACK_HEADER = DeviceHeader(
+    model="rb",
+    serial="1",
+    firmware="1",
+    sample_rate_hz=1000.0,
+    dt_ns=1_000_000,
+    scale_m_s2_per_count=1e-4,
+    range_m_s2=10.0,
+    noise_density_m_s2_rthz=math.nan,
+    has_temperature=False,
+)
+
+
+def wire_fates(mode, damage, per_frame=1):
+    """Fates the read-back gives six frames after ``damage(k, bytes) -> (bytes, damaged)``.
+
+    ``damage`` may return bytes for frame k with a prefix (garbage) or cut short.
+    """
+    log = FaultLog()
+    back = ReadBack(log, mode)
+    back.restart()
+    back.feed(encode_header(replace(READBACK_HEADER, mode=mode)))
+    for k in range(6):
+        counts = np.full((per_frame, 3), k + 1, np.int32)
+        wire, damaged = damage(k, encode_block(SampleBlock(k * per_frame, counts), mode))
+        log.add_frame(k * per_frame, per_frame, DAMAGED if damaged else SENT)
+        back.feed(wire, k, k * per_frame, counts)
+    back.finish()
+    assert log.undetected == []
+    return log.fate
+
+
+def test_a_lost_newline_swallows_the_next_line_and_the_log_says_so():
+    def drop_newline_of_2(k, line):
+        return (line[:-1], True) if k == 2 else (line, False)
+
+    assert wire_fates("line", drop_newline_of_2) == [SENT, SENT, DAMAGED, SWALLOWED, SENT, SENT]
+
+
+def test_garbage_swallows_the_start_of_the_next_line():
+    def garbage_before_4(k, line):
+        return (b"\x07junk" + line, False) if k == 4 else (line, False)
+
+    assert wire_fates("line", garbage_before_4) == [SENT, SENT, SENT, SENT, SWALLOWED, SENT]
+
+    def garbage_ending_in_a_newline(k, line):  # a line of its own: nothing lost
+        return (b"junk\n" + line, False) if k == 4 else (line, False)
+
+    assert wire_fates("line", garbage_ending_in_a_newline) == [SENT] * 6
+
+
+def test_a_harmless_change_is_logged_as_sent_and_two_lost_delimiters_merge_frames():
+    def lower_case_checksum(k, line):  # the CRC's hex digits may be in either case
+        if k != 1:
+            return line, False
+        assert line != line.lower(), "the checksum has a letter to change"
+        return line.lower(), True
+
+    fates = wire_fates("line", lower_case_checksum)
+    assert fates == [SENT] * 6, "arrived intact although the injector damaged a byte"
+
+    def drop_delimiters_between_1_and_2(k, frame):
+        if k == 1:
+            return frame[:-1], False  # one lost delimiter alone costs nothing
+        if k == 2:
+            return frame[1:], False
+        return frame, False
+
+    fates = wire_fates("binary", drop_delimiters_between_1_and_2, per_frame=25)
+    assert fates == [SENT, SWALLOWED, SWALLOWED, SENT, SENT, SENT]
 
 
 # -- trigger ---------------------------------------------------------------------------------
@@ -160,16 +242,6 @@ def test_stream_unwraps_counts_gaps_and_drops_stale_blocks():
 
 
 # -- reader ------------------------------------------------------------------------------------
-
-
-def make_pty(link):
-    master, slave = os.openpty()
-    name = os.ttyname(slave)
-    os.close(slave)
-    tmp = link.with_name("tmp-link")
-    os.symlink(name, tmp)
-    os.replace(tmp, link)
-    return master
 
 
 def wait_for(q, kind, timeout=5.0):

@@ -22,6 +22,7 @@ import pytest
 from history_child import MACHINE, index_of, run_for
 
 from imu_square.errors import HistoryError
+from imu_square.monitor import schema
 from imu_square.monitor.store import open_history
 
 CHILD = Path(__file__).with_name("history_child.py")
@@ -238,7 +239,7 @@ def test_an_empty_file_becomes_a_history(tmp_path):
     path = tmp_path / "history.db"
     path.touch()
     with open_history(path) as h:
-        assert h.schema_version == 2 and h.add_run(run_for(1))[1]
+        assert h.schema_version == schema.latest_version() and h.add_run(run_for(1))[1]
 
 
 def test_a_read_only_location_is_one_line(tmp_path):

@@ -2,7 +2,6 @@
 
 import json
 import secrets
-import signal
 import sys
 from pathlib import Path
 
@@ -14,7 +13,9 @@ def register(sub):
         help="emulate a serial accelerometer board on a pseudo-terminal",
         description="Simulate a circle test and stream it through the wire protocol on a "
         "pseudo-terminal symlinked at --link, in real time on the board's sample clock. "
-        "Writes the simulator's truth and the exact fault log as JSON and prints its path.",
+        "Writes the simulator's truth and the exact fault log as JSON and prints its path. "
+        "Exit codes: 0 streamed to the end, or stopped by Ctrl-C or SIGTERM (the truth is "
+        "written either way); 2 a bad option, or --link cannot be made.",
     )
     p.add_argument("--program", required=True, help="program TOML")
     p.add_argument("--machine", help="machine TOML (default: an ideal machine)")
@@ -47,6 +48,7 @@ def register(sub):
 
 def run(args):
     """Stream until the run is over (or Ctrl-C/SIGTERM), write the truth, print its path."""
+    from acquisition.commands._session import stop_signals
     from acquisition.emulator import emulated_board
     from acquisition.faults import parse_faults
     from imu_square.program import read_program
@@ -69,17 +71,13 @@ def run(args):
         seq_start=args.seq_start,
     )
     truth_path = Path(args.truth) if args.truth else Path(args.link + ".truth.json")
-    previous = {s: signal.signal(s, lambda *_: board.stop()) for s in _STOP_SIGNALS}
     print(
         f"emulated board on {args.link}: {len(board.counts)} samples at "
         f"{board.header.sample_rate_hz:g} Hz, speed x{args.speed:g}, {args.mode} mode",
         file=sys.stderr,
     )
-    try:
+    with stop_signals(board.stop):
         log = board.run()
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
     truth["emulator"] = {
         "link": args.link,
         "mode": args.mode,
@@ -93,12 +91,10 @@ def run(args):
     truth_path.write_text(json.dumps(truth, indent=1) + "\n", encoding="utf-8")
     summary = log.summary()
     print(
-        f"sent {summary['samples_sent']}, damaged {summary['samples_damaged']}, lost with no "
-        f"host {summary['samples_no_host']}, overflow {summary['samples_overflow']} samples",
+        f"sent {summary['samples_sent']}, damaged {summary['samples_damaged']}, swallowed by "
+        f"a neighbour's damage {summary['samples_swallowed']}, lost with no host "
+        f"{summary['samples_no_host']}, overflow {summary['samples_overflow']} samples",
         file=sys.stderr,
     )
     print(truth_path)
     return 0
-
-
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)

@@ -10,13 +10,10 @@ simulator's truth, so the result can be checked against it.
 import json
 import math
 import secrets
-import signal
 import sys
 import threading
 import time
 from pathlib import Path
-
-EXIT_INCOMPLETE = 3
 
 
 def register(sub):
@@ -27,7 +24,10 @@ def register(sub):
         description="Record one circle test and analyse it: writes RUN.mcap, RUN.result.json "
         "and RUN.png into --out. Without --port, an emulated board streams a simulated machine "
         "(built-in: the paper's test on a typical machine with the paper's sensor) through a "
-        "pseudo-terminal, and RUN.truth.json holds what the simulator put in.",
+        "pseudo-terminal, and RUN.truth.json holds what the simulator put in. Exit codes: 0 a "
+        "complete run, analysed; 3 the recording is incomplete (see 'imu-square record'), "
+        "analysed if it could be; 2 a bad option, nothing recorded, or the run cannot be "
+        "analysed; 4 writing the recording failed part-way (disk full).",
     )
     p.add_argument("--port", help="serial port of a real board (default: an emulated board)")
     p.add_argument("--baud", type=int, default=921600, help="line speed (default 921600)")
@@ -74,7 +74,7 @@ def _start_board(args, program, link):
 
 def run(args):
     """Record, analyse, write the result and the plot; compare with the truth when emulated."""
-    from acquisition.progress import ProgressPrinter, describe
+    from acquisition.commands._session import report, run_recorder
     from acquisition.recorder import Recorder
     from imu_square.errors import AnalysisError
     from imu_square.io.mcap import read_mcap
@@ -101,7 +101,6 @@ def run(args):
             file=sys.stderr,
         )
     trigger = args.trigger or ("marker" if board is not None else "motion")
-    printer = ProgressPrinter(sys.stderr)
     recorder = Recorder(
         mcap_path,
         port,
@@ -110,19 +109,14 @@ def run(args):
         trigger=trigger,
         until_done=True,
         machine_id=args.machine_id or ("emulated" if board is not None else ""),
-        progress=printer,
     )
-    previous = {s: signal.signal(s, lambda *_: recorder.stop()) for s in _STOP_SIGNALS}
     try:
-        status = recorder.run()
+        status = run_recorder(recorder, quiet=args.quiet)
     finally:
-        printer.close()
-        for s, handler in previous.items():
-            signal.signal(s, handler)
         if board is not None:
             board.stop()
             thread.join(timeout=15.0)
-    print(f"{mcap_path}: {describe(status)}", file=sys.stderr)
+    code = report(mcap_path, status)
 
     try:
         result = analyze(read_mcap(mcap_path))
@@ -155,7 +149,4 @@ def run(args):
         )
     print(f"wrote {stem}.result.json and {stem}.png", file=sys.stderr)
     print(json.dumps(doc))
-    return 0 if status.complete else EXIT_INCOMPLETE
-
-
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    return code

@@ -2,13 +2,22 @@
 
 import json
 
+from imu_square.cli import EXIT_INCOMPLETE
 from imu_square.io.mcap import scan_mcap, summarize
 from imu_square.units import UG
 
 
 def register(sub):
     """Add the ``info`` subcommand."""
-    p = sub.add_parser("info", help="summarise an MCAP recording")
+    p = sub.add_parser(
+        "info",
+        help="summarise an MCAP recording",
+        description="Print what an MCAP recording holds: samples, gaps, channels, program, "
+        "sensor, events, and how the recorder said the run went. Exit codes: 0 a complete "
+        "file; 3 incomplete: the file is cut (imu-square recover rewrites what it holds) or "
+        "the recorder marked the run incomplete (the 'run' line says why); 2 not a readable "
+        "recording.",
+    )
     p.add_argument("recording", help="MCAP file")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
@@ -52,6 +61,10 @@ def _text(path, summary):
         )
     )
     lines.append(f"  machine    {s['machine_id'] or '(not given)'}")
+    run = s["run"]
+    if run is not None:
+        state = "complete" if run["complete"] else "INCOMPLETE: " + "; ".join(run["problems"])
+        lines.append(f"  run        {state} (stop: {run['stop']})")
     events = s["events"]
     lines.append(
         "  events     " + (", ".join(f"{k} {n}" for k, n in events.items()) if events else "none")
@@ -76,4 +89,7 @@ def run(args):
         print(json.dumps(summary, indent=2))
     else:
         print(_text(args.recording, summary))
+    run = summary["run"]
+    if not report.complete or (run is not None and not run["complete"]):
+        return EXIT_INCOMPLETE
     return 0

@@ -37,6 +37,7 @@ import struct
 import warnings
 import zlib
 from collections import Counter
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -50,7 +51,12 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 import imu_square
-from imu_square.errors import ImuSquareWarning, RecordingError
+from imu_square.errors import (
+    ImuSquareWarning,
+    OutputError,
+    OutputWriteError,
+    RecordingError,
+)
 from imu_square.io.cdr import (
     ACCEL_BATCH_SCHEMA,
     ACCEL_BATCH_SCHEMA_NAME,
@@ -61,6 +67,7 @@ from imu_square.io.cdr import (
     encode_vector3_stamped,
 )
 from imu_square.io.recording import Event, Recording, SensorInfo
+from imu_square.io.runlog import run_outcome
 from imu_square.program import parse_program
 
 ACCEL_TOPIC = "/imu/accel"
@@ -147,6 +154,15 @@ class RecordingWriter:
     ----------
     samples_written : int
         Samples given to :meth:`write_samples` so far.
+
+    Raises
+    ------
+    OutputError
+        When the file cannot be created.
+    OutputWriteError
+        From any method, when writing fails part-way (disk full, I/O error):
+        the writer is then closed, and the file keeps what was written before
+        (every complete chunk; :func:`scan_mcap` reads it).
     """
 
     def __init__(
@@ -170,14 +186,18 @@ class RecordingWriter:
         self._fsync = fsync
         self._closed = False
         self._owns = isinstance(path_or_stream, str | os.PathLike)
-        self._stream = open(path_or_stream, "wb") if self._owns else path_or_stream
         self._name = str(path_or_stream) if self._owns else "<stream>"
+        self._stream = _create(path_or_stream) if self._owns else path_or_stream
         self._pending = None  # (seq, time_ns, accel, temperature) not yet in a batch
         self._last = None  # (seq, time_ns) of the last sample received
         self._has_temperature = None
         self._writer = Writer(
             self._stream, chunk_size=int(chunk_size), compression=CompressionType.ZSTD
         )
+        with self._writing():
+            self._start(program, sensor, machine_id, metadata, processing)
+
+    def _start(self, program, sensor, machine_id, metadata, processing):
         self._writer.start(
             profile="ros2", library=f"imu-square {imu_square.__version__}; {LIBRARY_IDENTIFIER}"
         )
@@ -266,17 +286,18 @@ class RecordingWriter:
             raise RecordingError(
                 "write_samples: seq and time_ns must increase strictly, also across calls"
             )
-        if self._last is None:
-            self._writer.add_metadata("sequence", {"first_seq": str(int(seq[0]))})
-        self._last = (int(seq[-1]), int(time_ns[-1]))
-        self.samples_written += n
-        if self._pending is not None:
-            p = self._pending
-            seq = np.concatenate([p[0], seq])
-            time_ns = np.concatenate([p[1], time_ns])
-            accel = np.concatenate([p[2], accel])
-            temp = None if temp is None else np.concatenate([p[3], temp])
-        self._pending = self._write_batches(seq, time_ns, accel, temp, final=False)
+        with self._writing():
+            if self._last is None:
+                self._writer.add_metadata("sequence", {"first_seq": str(int(seq[0]))})
+            self._last = (int(seq[-1]), int(time_ns[-1]))
+            self.samples_written += n
+            if self._pending is not None:
+                p = self._pending
+                seq = np.concatenate([p[0], seq])
+                time_ns = np.concatenate([p[1], time_ns])
+                accel = np.concatenate([p[2], accel])
+                temp = None if temp is None else np.concatenate([p[3], temp])
+            self._pending = self._write_batches(seq, time_ns, accel, temp, final=False)
 
     def _write_batches(self, seq, time_ns, accel, temp, final):
         """Write full batches; return the samples left over (or None)."""
@@ -344,7 +365,8 @@ class RecordingWriter:
             }
         ).encode()
         log_time = max(int(event.time_ns), 0)
-        self._writer.add_message(self._event_ch, log_time, data, log_time)
+        with self._writing():
+            self._writer.add_message(self._event_ch, log_time, data, log_time)
 
     def flush(self):
         """Write the pending partial batch, close the current chunk, fsync if asked.
@@ -353,25 +375,42 @@ class RecordingWriter:
         would leave it) yields every sample written so far.
         """
         self._check_open()
-        if self._pending is not None:
-            self._pending = self._write_batches(*self._pending, final=True)
-        self._writer.flush()
-        self._sync()
+        with self._writing():
+            if self._pending is not None:
+                self._pending = self._write_batches(*self._pending, final=True)
+            self._writer.flush()
+            self._sync()
 
     def close(self):
         """Finish the file (summary and indexes) and close it; idempotent."""
         if self._closed:
             return
         try:
-            if self._pending is not None:
-                self._pending = self._write_batches(*self._pending, final=True)
-            self._writer.finish()
-            self._stream.flush()
-            self._sync()
+            with self._writing():
+                if self._pending is not None:
+                    self._pending = self._write_batches(*self._pending, final=True)
+                self._writer.finish()
+                self._stream.flush()
+                self._sync()
         finally:
+            if not self._closed:  # not already closed by a write failure
+                self._closed = True
+                if self._owns:
+                    self._stream.close()
+
+    @contextmanager
+    def _writing(self):
+        """Turn an OSError of the file into one :class:`OutputWriteError`, closing the file."""
+        try:
+            yield
+        except OSError as exc:
             self._closed = True
             if self._owns:
-                self._stream.close()
+                try:  # flushing Python's buffer fails again; the descriptor is closed anyway
+                    self._stream.close()
+                except OSError:
+                    pass
+            raise OutputWriteError(f"{self._name}: writing failed: {exc.strerror or exc}") from None
 
     def _sync(self):
         if self._fsync and hasattr(self._stream, "fileno"):
@@ -381,6 +420,16 @@ class RecordingWriter:
     def _check_open(self):
         if self._closed:
             raise RecordingError(f"{self._name}: the recording writer is closed")
+
+
+def _create(path):
+    """Open ``path`` for writing, truncated; one :class:`OutputError` if it cannot be."""
+    try:
+        return open(path, "wb")
+    except IsADirectoryError:
+        raise OutputError(f"{path}: is a directory; give a file name inside it") from None
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot create the recording: {exc.strerror or exc}") from None
 
 
 def write_mcap(recording, path):
@@ -393,8 +442,16 @@ def write_mcap(recording, path):
         (temperatures as float32).
     path : str, Path or binary file object
         Destination.
+
+    Raises
+    ------
+    OutputError
+        When the file cannot be created.
+    OutputWriteError
+        When writing fails part-way; a file given by its path is then
+        removed, since it holds only part of the recording.
     """
-    with RecordingWriter(
+    writer = RecordingWriter(
         path,
         dt_ns=recording.dt_ns,
         program=recording.program,
@@ -402,12 +459,19 @@ def write_mcap(recording, path):
         machine_id=recording.machine_id,
         metadata=recording.metadata,
         processing=recording.processing,
-    ) as writer:
-        writer.write_samples(
-            recording.seq, recording.time_ns, recording.accel, recording.temperature_c
-        )
-        for event in recording.events:
-            writer.write_event(event)
+    )
+    try:
+        with writer:
+            writer.write_samples(
+                recording.seq, recording.time_ns, recording.accel, recording.temperature_c
+            )
+            for event in recording.events:
+                writer.write_event(event)
+    except OutputWriteError as exc:
+        if isinstance(path, str | os.PathLike):
+            Path(path).unlink(missing_ok=True)
+            raise OutputWriteError(f"{exc}; the partial file was removed") from None
+        raise
 
 
 @dataclass(frozen=True)
@@ -853,7 +917,9 @@ def read_mcap(path):
 
     A file cut short (a crash, a full disk, a pulled cable) gives every
     sample of its complete chunks, with an :class:`ImuSquareWarning` saying
-    how many and where the file was cut.
+    how many and where the file was cut. A run whose end is missing (the
+    recorder wrote a gap after its last sample: the board went away) warns
+    too, saying how much is missing and why.
 
     Parameters
     ----------
@@ -877,6 +943,13 @@ def read_mcap(path):
             f"({rec.duration_s:.3f} s) and {r.events} events from the complete chunks; the "
             f"file is cut at byte {r.cut_at_byte} of {r.file_bytes}; "
             f"'imu-square recover' rewrites it whole",
+            ImuSquareWarning,
+            stacklevel=2,
+        )
+    outcome = run_outcome(contents.recording)
+    if outcome is not None and outcome.lost_at_end:
+        warnings.warn(
+            f"{path}: the run's end is missing: {'; '.join(outcome.problems)}",
             ImuSquareWarning,
             stacklevel=2,
         )
@@ -929,10 +1002,13 @@ def summarize(recording):
         [ns], ``start_time_ns`` [ns], ``gaps`` (count, lost), ``channels``
         (axes and temperature), ``program`` (file units) or None, ``sensor``
         (NaN as None), ``machine_id``, ``events`` (count by kind),
-        ``metadata`` and ``processing``.
+        ``metadata``, ``processing``, and ``run``: how the recorder said the
+        run went (:class:`~imu_square.io.runlog.RunOutcome`), None for a
+        file without a ``run_end`` event.
     """
     gaps = recording.gaps()
     program = recording.program
+    outcome = run_outcome(recording)
     return {
         "samples": recording.n_samples,
         "duration_s": recording.duration_s,
@@ -955,4 +1031,5 @@ def summarize(recording):
         "events": dict(sorted(Counter(e.kind for e in recording.events).items())),
         "metadata": dict(recording.metadata),
         "processing": list(recording.processing),
+        "run": None if outcome is None else outcome.to_json_dict(),
     }

@@ -23,7 +23,7 @@ AXES = ("x", "y", "z")
 EVENT_KINDS = (
     "block_start",  # CNC marker or simulator: a CCW/CW block starts moving
     "block_end",
-    "gap",  # samples lost: detail has the count
+    "gap",  # samples lost: detail lost=N[,lost_s=T][,cause=...] (cause: a run's missing end)
     "crc_error",
     "reconnect",
     "run_start",

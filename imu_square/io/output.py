@@ -1,0 +1,87 @@
+"""Where an output file may go: checked before any work, so no run is lost to a bad path.
+
+A recording can start hours after the command, when a CNC's marker fires; a
+path that cannot be written must be refused at once, not after the machine
+has run. :func:`check_output_path` refuses a missing folder, a directory, a
+folder where no file can be created, and (unless asked) an existing file.
+:func:`check_free_space` refuses a disk too small for what is about to be
+written.
+"""
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from imu_square.errors import OutputError
+
+MB = 1e6  # display unit of disk space [bytes]
+
+
+def check_output_path(path, *, overwrite=False):
+    """Refuse an output path that cannot be written, before any work is done.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written.
+    overwrite : bool
+        Accept an existing file (it is replaced when writing starts).
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputError
+        Naming the path and what is wrong with it.
+    """
+    path = Path(path)
+    folder = path.parent
+    if path.is_dir():
+        raise OutputError(f"{path}: is a directory; give a file name inside it")
+    if not folder.exists():
+        raise OutputError(f"{path}: the folder {str(folder)!r} does not exist")
+    if not folder.is_dir():
+        raise OutputError(f"{path}: {str(folder)!r} is not a folder")
+    if path.exists() or path.is_symlink():
+        if not overwrite:
+            raise OutputError(f"{path}: already exists; refusing to replace it (--overwrite does)")
+        if not os.access(path, os.W_OK):
+            raise OutputError(f"{path}: exists and is not writable")
+        return path
+    try:  # the only sure test that a file can be created there (permissions, read-only mounts)
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".imu-square-probe-"):
+            pass
+    except OSError as exc:
+        raise OutputError(
+            f"{path}: cannot create a file in {str(folder)!r}: {exc.strerror or exc}"
+        ) from None
+    return path
+
+
+def check_free_space(path, needed_bytes, what):
+    """Refuse to start writing ``path`` when its disk cannot hold ``needed_bytes``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file about to be written (its folder must exist).
+    needed_bytes : float
+        Upper estimate of the file's size. [bytes]
+    what : str
+        What is being written, for the message (e.g. ``"215 s at 1000 Hz"``).
+
+    Raises
+    ------
+    OutputError
+        When the free space is below ``needed_bytes``.
+    """
+    free = shutil.disk_usage(Path(path).parent).free
+    if free < needed_bytes:
+        raise OutputError(
+            f"{path}: the disk has {free / MB:.1f} MB free, and the recording ({what}) needs "
+            f"up to {needed_bytes / MB:.1f} MB: free some space or write elsewhere"
+        )
