@@ -30,6 +30,10 @@ class AcquisitionError(ImuSquareError):
     """The serial link or the device misbehaved in a way the recorder cannot absorb."""
 
 
+class MonitorError(ImuSquareError):
+    """The monitor's settings, its alarm design or the nights it is given are invalid."""
+
+
 class ImuSquareWarning(UserWarning):
     """A recoverable oddity: the result is still produced, but say so."""
 
