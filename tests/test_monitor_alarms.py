@@ -15,7 +15,13 @@ from numpy.testing import assert_allclose
 from scipy import special, stats
 
 from imu_square.errors import MonitorError
-from imu_square.monitor.alarms import AlarmDesign, baseline_effect, design_alarms, evaluate
+from imu_square.monitor.alarms import (
+    AlarmDesign,
+    baseline_effect,
+    design_alarms,
+    evaluate,
+    to_design_law,
+)
 from imu_square.monitor.arl import (
     Cusum,
     Ewma,
@@ -388,6 +394,7 @@ def test_design_reports_out_of_control_run_lengths(design):
     assert c.arl1 <= min(ch.arl1 for ch in design.charts) + 3 * c.u_arl1
     assert c.arl1_steady <= c.arl1 + 3 * math.hypot(c.u_arl1, c.u_arl1_steady)
     assert c.arl1 < c.ramp_median <= c.ramp_p90 < 90
+    assert c.step_median <= c.arl1 + 3 * c.u_arl1 and c.step_median <= c.step_p90
 
 
 def test_design_round_trips_through_json_and_describes_itself(design):
@@ -512,6 +519,20 @@ def test_evaluation_matches_the_vectorised_statistics_when_quiet(design):
     assert_allclose([p.ewma for p in ev.points], ewma, atol=1e-12)
     assert_allclose([p.cusum_pos for p in ev.points], cpos, atol=1e-12)
     assert_allclose([p.cusum_neg for p in ev.points], cneg, atol=1e-12)
+
+
+def test_mapping_onto_the_design_law_keeps_each_nights_tail_probability():
+    z = np.array([-7.0, -2.5, -0.3, 0.0, 0.4, 1.9, 3.3, 60.0])
+    nu = np.array([4.0, np.nan, 14.0, 4.0, 30.0, np.nan, 4.0, 2.0])
+    mapped = to_design_law(z, nu, 14.0)
+    own = np.where(np.isnan(nu), stats.norm.cdf(z), stats.t.cdf(z, np.nan_to_num(nu, nan=1.0)))
+    assert_allclose(stats.t.cdf(mapped, 14), own, rtol=1e-10, atol=1e-300)
+    assert mapped[2] == z[2]  # the design's own law: unchanged
+    assert abs(mapped[0]) < 7.0 and abs(mapped[5]) > 1.9  # t(4) tails pulled in, normal pushed out
+    assert_allclose(to_design_law(z, None, None), z)
+    # A normal tail beyond double precision (sf(40) underflows) keeps the night's own z.
+    assert to_design_law([-40.0], None, 3.0)[0] == -40.0
+    assert to_design_law([1e4], 2.0, None)[0] == pytest.approx(stats.norm.isf(stats.t.sf(1e4, 2)))
 
 
 @pytest.mark.parametrize(

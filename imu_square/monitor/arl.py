@@ -96,8 +96,20 @@ class NightLaw:
     shift: float = 0.0
 
     def pdf(self, x):
-        """Probability density at ``x`` (array-like). [1]
+        """Probability density of ``z``.
 
+        Parameters
+        ----------
+        x : array-like
+            Where to evaluate it. [1]
+
+        Returns
+        -------
+        ndarray
+            The density, shaped like ``x``. [1]
+
+        Notes
+        -----
         The noncentral t's density is slow to evaluate (1 to 8 µs a point);
         on large arrays it is evaluated exactly on a grid uniform in
         ``u = asinh(x / _PDF_SCALE)`` (fine in the core, coarser in the tails
@@ -120,7 +132,18 @@ class NightLaw:
         return interpolate.CubicSpline(grid, exact)(u)
 
     def cdf(self, x):
-        """Distribution function at ``x`` (array-like). [1]"""
+        """Distribution function of ``z``.
+
+        Parameters
+        ----------
+        x : array-like
+            Where to evaluate it. [1]
+
+        Returns
+        -------
+        ndarray
+            ``P(z <= x)``, shaped like ``x``. [1]
+        """
         x = np.asarray(x, dtype=np.float64)
         if self.nu is None:
             return special.ndtr(x - self.shift)
@@ -133,11 +156,32 @@ class NightLaw:
         return replace(self, shift=-self.shift)
 
     def shifted(self, by):
-        """The law after the true change moves by ``by`` standard deviations."""
+        """The law after the true change moves.
+
+        Parameters
+        ----------
+        by : float
+            The move, in the night's standard deviations. [1]
+
+        Returns
+        -------
+        NightLaw
+        """
         return replace(self, shift=self.shift + float(by))
 
     def tail(self, limit):
-        """``P(|z| > limit)`` for ``limit >= 0``, accurate in the far tails. [1]"""
+        """Two-sided tail probability, accurate in the far tails.
+
+        Parameters
+        ----------
+        limit : float
+            Threshold, ``>= 0``. [1]
+
+        Returns
+        -------
+        float
+            ``P(|z| > limit)``. [1]
+        """
         if self.nu is None:
             return float(special.ndtr(self.shift - limit) + special.ndtr(-limit - self.shift))
         if self.shift == 0.0:
@@ -170,7 +214,7 @@ class Shewhart:
     limit: float
 
     def with_limit(self, limit):
-        """The same chart with another limit."""
+        """The same chart with another limit ``limit`` [1]."""
         return replace(self, limit=float(limit))
 
     def arl(self, law, nodes=None):
@@ -226,7 +270,7 @@ class Ewma:
     limit: float
 
     def with_limit(self, limit):
-        """The same chart with another limit."""
+        """The same chart with another limit ``limit`` [1]."""
         return replace(self, limit=float(limit))
 
     def default_nodes(self):
@@ -324,7 +368,7 @@ class Cusum:
     limit: float
 
     def with_limit(self, limit):
-        """The same chart with another limit."""
+        """The same chart with another limit ``limit`` [1]."""
         return replace(self, limit=float(limit))
 
     def default_nodes(self):
