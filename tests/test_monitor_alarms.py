@@ -549,3 +549,18 @@ def test_mapping_onto_the_design_law_keeps_each_nights_tail_probability():
 def test_evaluation_refuses_bad_nights(design, args, message):
     with pytest.raises(MonitorError, match=message):
         evaluate(design, *args)
+
+
+def test_far_shifts_and_poor_baselines_stay_finite():
+    # scipy's noncentral t gives NaN where a tail underflows: the law must not pass it on.
+    law = NightLaw(nu=19)
+    tails = [law.shifted(d).tail(4.0) for d in np.linspace(0.0, 12.0, 25)]
+    assert all(np.isfinite(tails)) and np.all(np.diff(tails) > 0) and tails[-1] <= 1.0
+    assert law.shifted(-8.0).tail(4.0) == pytest.approx(law.shifted(8.0).tail(4.0), rel=1e-12)
+    assert np.all(np.isfinite(law.shifted(6.0).cdf(np.array([-4.0, 0.0, 6.0]))))
+    # a baseline from three noisy runs is as poor as 0.7-1.5 nights' sigma: still designed
+    for ratio in (0.7, 1.5):
+        d = design_alarms(
+            730, 17e-6, step_rad=30e-6, nu=19, baseline_sd_ratio=ratio, mc_nights=200_000
+        )
+        assert all(np.isfinite([c.limit for c in d.charts])) and d.check.arl0 > 300

@@ -149,7 +149,13 @@ class NightLaw:
             return special.ndtr(x - self.shift)
         if self.shift == 0.0:
             return special.stdtr(self.nu, x)
-        return special.nctdtr(self.nu, self.shift, x)
+        out = np.asarray(special.nctdtr(self.nu, self.shift, x), dtype=np.float64)
+        # nctdtr gives NaN where the probability underflows, far out in a tail: it is
+        # 0 below the law's centre and 1 above it, to double precision.
+        lost = np.isnan(out)
+        if lost.any():
+            out = np.where(lost, (x > self.shift).astype(np.float64), out)
+        return out
 
     def mirrored(self):
         """The law of ``-z``."""
@@ -186,9 +192,15 @@ class NightLaw:
             return float(special.ndtr(self.shift - limit) + special.ndtr(-limit - self.shift))
         if self.shift == 0.0:
             return float(2.0 * stats.t.sf(limit, self.nu))
-        return float(
-            stats.nct.sf(limit, self.nu, self.shift) + stats.nct.cdf(-limit, self.nu, self.shift)
-        )
+        upper = stats.nct.sf(limit, self.nu, self.shift)
+        lower = stats.nct.cdf(-limit, self.nu, self.shift)
+        # scipy gives NaN where a tail underflows; on the side away from the shift that
+        # tail is 0 to double precision, and the other side is then the whole answer.
+        if math.isnan(lower):
+            lower = 0.0 if self.shift > -limit else 1.0
+        if math.isnan(upper):
+            upper = 0.0 if self.shift < limit else 1.0
+        return float(upper + lower)
 
 
 @lru_cache(maxsize=64)
