@@ -1,10 +1,15 @@
-"""``imu-square nightly``: the nightly warm-up run, from the sensor to a result and a plot.
+"""``imu-square nightly``: the nightly warm-up run, from the sensor to a verdict.
 
-With ``--port`` it records a real board. Without it, it runs the whole chain
-on built-in defaults: the simulator drives an emulated board on a
-pseudo-terminal, the recorder streams it into MCAP through the real serial
-path, and the pipeline analyses the file. The emulated run also writes the
-simulator's truth, so the result can be checked against it.
+With ``--config MONITOR.toml`` it is the monitor's nightly job: record (or take
+``--recording``), analyse, store in the history, judge against the machine's
+baseline, send the alerts, write the metrics, the trend chart and the report,
+and end with one line and the state's exit code. ``--demo DIR`` does the same
+on a demonstration machine whose history it seeds from the simulator.
+
+Without ``--config`` it records and analyses one run, as before the monitor:
+with ``--port`` from a real board; without it, the simulator drives an
+emulated board on a pseudo-terminal, the recorder streams it into MCAP through
+the real serial path, and the run's truth is written beside it.
 """
 
 import json
@@ -48,20 +53,45 @@ def register(sub):
         "motion with --port)",
     )
     p.add_argument("--machine-id", default="", help="machine the test runs on")
-    p.add_argument("--out", default="imu-square-out", help="output folder (default: %(default)s)")
+    p.add_argument(
+        "--out",
+        help="output folder (default: imu-square-out; with --config the "
+        "monitor file's data folder)",
+    )
+    monitor = p.add_argument_group(
+        "the monitor",
+        "exit codes with --config or --demo: 0 ok, 10 warning, 11 alarm, 12 invalid run, "
+        "13 stale baseline (the sensor was remounted), 14 no baseline yet; 2 a user's mistake "
+        "(nothing stored), 4 writing the recording failed part-way, 130 interrupted",
+    )
+    monitor.add_argument("--config", metavar="MONITOR.toml", help="the machine's monitor file")
+    monitor.add_argument(
+        "--recording", metavar="RUN.mcap", help="judge this recording instead of recording one"
+    )
+    monitor.add_argument(
+        "--json", action="store_true", help="the night's record (state, change_urad, ...) on stdout"
+    )
+    monitor.add_argument(
+        "--check", action="store_true", help="check the monitor file and the history, then stop"
+    )
+    monitor.add_argument(
+        "--demo",
+        metavar="DIR",
+        help="a demonstration machine in DIR: its monitor file and a history seeded from the "
+        "simulator (a baseline, weeks of nights, drift and one repaired degradation), then "
+        "tonight through the emulated board",
+    )
     p.set_defaults(func=run)
 
 
-def _start_board(args, program, link):
+def _start_board(program, machine_file, sensor_file, seed, speed, link):
     from acquisition.emulator import emulated_board
     from imu_square.simulate import data_path, read_machine, read_sensor
 
-    machine = read_machine(args.machine or data_path("machine_typical.toml"))
-    sensor = read_sensor(args.sensor or data_path("sensor_paper.toml"))
-    seed = args.seed if args.seed is not None else secrets.randbits(31)
-    board, truth = emulated_board(
-        program, machine, sensor, seed=seed, link=str(link), speed=args.speed
-    )
+    machine = read_machine(machine_file or data_path("machine_typical.toml"))
+    sensor = read_sensor(sensor_file or data_path("sensor_paper.toml"))
+    seed = seed if seed is not None else secrets.randbits(31)
+    board, truth = emulated_board(program, machine, sensor, seed=seed, link=str(link), speed=speed)
     thread = threading.Thread(target=board.run, name="emulated-board", daemon=True)
     thread.start()
     if not board.ready.wait(10.0):
@@ -72,10 +102,63 @@ def _start_board(args, program, link):
     return board, thread, truth
 
 
-def run(args):
-    """Record, analyse, write the result and the plot; compare with the truth when emulated."""
+def _record(
+    stem, program, *, port, emulated, baud, trigger, machine_id, quiet, header_timeout_s=5.0
+):
+    """Record one run into ``stem.mcap``; an emulated board when ``port`` is None.
+
+    ``emulated`` is ``(machine_file, sensor_file, seed, speed)``. Returns the
+    recording's path, the recorder's status, its exit code and the emulated
+    run's truth (None for a real board).
+    """
     from acquisition.commands._session import report, run_recorder
     from acquisition.recorder import Recorder
+
+    mcap_path = stem.with_suffix(".mcap")
+    board = thread = truth = None
+    if port is None:
+        port = str(stem.with_suffix(".tty"))
+        board, thread, truth = _start_board(program, *emulated, port)
+        print(
+            f"emulated board on {port}: the circle test at x{emulated[3]:g} speed "
+            f"({program.duration_s / emulated[3]:.0f} s)",
+            file=sys.stderr,
+        )
+    recorder = Recorder(
+        mcap_path,
+        port,
+        baudrate=baud,
+        program=program,
+        trigger=trigger or ("marker" if board is not None else "motion"),
+        until_done=True,
+        machine_id=machine_id or ("emulated" if board is not None else ""),
+        header_timeout_s=header_timeout_s,
+    )
+    try:
+        status = run_recorder(recorder, quiet=quiet)
+    finally:
+        if board is not None:
+            board.stop()
+            thread.join(timeout=15.0)
+    return mcap_path, status, report(mcap_path, status), truth
+
+
+def run(args):
+    """The monitor's night with --config or --demo; otherwise record and analyse one run."""
+    if args.demo:
+        return run_demo(args)
+    if args.config:
+        return run_monitor(args)
+    for flag in ("recording", "json", "check"):
+        if getattr(args, flag):
+            from imu_square.errors import ImuSquareError
+
+            raise ImuSquareError(f"--{flag} goes with --config (the monitor's nightly job)")
+    return run_single(args)
+
+
+def run_single(args):
+    """Record, analyse, write the result and the plot; compare with the truth when emulated."""
     from imu_square.errors import AnalysisError
     from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.plot import plot_results
@@ -85,39 +168,19 @@ def run(args):
     from imu_square.units import SQUARENESS_UNIT, URAD
 
     program = read_program(args.program or data_path("program_paper.toml"))
-    out = Path(args.out)
+    out = Path(args.out or "imu-square-out")
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"nightly-{time.strftime('%Y%m%d-%H%M%S')}"
-    mcap_path = stem.with_suffix(".mcap")
-
-    board = thread = truth = None
-    port = args.port
-    if port is None:
-        port = str(stem.with_suffix(".tty"))
-        board, thread, truth = _start_board(args, program, port)
-        print(
-            f"emulated board on {port}: the circle test at x{args.speed:g} speed "
-            f"({program.duration_s / args.speed:.0f} s)",
-            file=sys.stderr,
-        )
-    trigger = args.trigger or ("marker" if board is not None else "motion")
-    recorder = Recorder(
-        mcap_path,
-        port,
-        baudrate=args.baud,
-        program=program,
-        trigger=trigger,
-        until_done=True,
-        machine_id=args.machine_id or ("emulated" if board is not None else ""),
+    mcap_path, status, code, truth = _record(
+        stem,
+        program,
+        port=args.port,
+        emulated=(args.machine, args.sensor, args.seed, args.speed),
+        baud=args.baud,
+        trigger=args.trigger,
+        machine_id=args.machine_id,
+        quiet=args.quiet,
     )
-    try:
-        status = run_recorder(recorder, quiet=args.quiet)
-    finally:
-        if board is not None:
-            board.stop()
-            thread.join(timeout=15.0)
-    code = report(mcap_path, status)
-
     try:
         result = analyze(read_mcap(mcap_path))
     except AnalysisError as exc:  # the pipeline names no file: say which
@@ -150,3 +213,86 @@ def run(args):
     print(f"wrote {stem}.result.json and {stem}.png", file=sys.stderr)
     print(json.dumps(doc))
     return code
+
+
+_SINGLE_RUN_FLAGS = ("port", "program", "machine", "sensor", "seed", "trigger", "machine_id")
+
+
+def run_monitor(args, config=None):
+    """The monitor's night: record (or take a recording), judge, report, exit with the state."""
+    from imu_square.errors import ImuSquareError
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.night import judge_recording
+    from imu_square.monitor.outputs import write_night_outputs
+    from imu_square.monitor.schedule import EXIT_CODES
+    from imu_square.monitor.store import open_history
+    from imu_square.program import read_program
+    from imu_square.simulate import data_path
+
+    given = [f"--{f.replace('_', '-')}" for f in _SINGLE_RUN_FLAGS if getattr(args, f)]
+    if given:
+        raise ImuSquareError(
+            f"{', '.join(given)} cannot go with --config: the monitor file says where the "
+            f"sensor is and which program runs"
+        )
+    config = config or read_monitor(args.config)
+    program = read_program(config.program or data_path("program_paper.toml"))
+    out = Path(args.out) if args.out else config.output_dir()
+    with open_history(config.history_location()) as history:
+        if args.check:
+            print(
+                f"{config.path}: machine {config.machine_id}, history {history.location} "
+                f"({len(history.runs(config.machine_id))} runs), program "
+                f"{config.program or 'the paper test'}, sensor {config.sensor.port}: ok",
+                file=sys.stderr,
+            )
+            return 0
+        complete = True
+        code = 0
+        if args.recording:
+            path = Path(args.recording)
+        else:
+            out.mkdir(parents=True, exist_ok=True)
+            stem = out / f"{config.machine_id}-{time.strftime('%Y%m%d-%H%M%S')}"
+            emu = config.emulated
+            path, status, code, _ = _record(
+                stem,
+                program,
+                port=None if config.sensor.emulated else config.sensor.port,
+                emulated=(emu.machine, emu.sensor, None, emu.speed),
+                baud=config.sensor.baud,
+                trigger=config.sensor.trigger,
+                machine_id=config.machine_id,
+                quiet=args.quiet,
+                header_timeout_s=config.sensor.header_timeout_s,
+            )
+            complete = status.complete
+        outcome = judge_recording(config, history, path, program, complete)
+        files = write_night_outputs(config, outcome, out)
+    for name, value in (("trend chart", files.trend_png), ("report", files.report_html)):
+        if value is not None:
+            print(f"wrote the {name} {value}", file=sys.stderr)
+    if files.alerts is not None:
+        for o in files.alerts.outcomes:
+            if o.status not in ("sent", "skipped"):
+                print(f"alert to {o.sink}: {o.status} ({o.error})", file=sys.stderr)
+    if not outcome.inserted:
+        print(
+            f"{path}: already in the history (run {outcome.run_id}), judged again", file=sys.stderr
+        )
+    print(f"{config.machine_id}: {outcome.verdict}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(outcome.record))
+    # a failed write outranks the verdict: the night must be looked at
+    return code if code == 4 else EXIT_CODES[outcome.state]
+
+
+def run_demo(args):
+    """Seed a demonstration machine's history from the simulator, then run its night."""
+    from imu_square.errors import ImuSquareError
+    from imu_square.monitor.demo import prepare_demo
+
+    if args.config or args.recording:
+        raise ImuSquareError("--demo makes its own monitor file and recording")
+    config = prepare_demo(Path(args.demo), progress=lambda text: print(text, file=sys.stderr))
+    return run_monitor(args, config)

@@ -32,6 +32,7 @@ file, as ``imu-square init`` writes it::
     [alarms]
     false_alarm_nights = 730     # accept one false alarm in this many nights
     step_um_per_m = 10.0         # the change to detect, for the out-of-control run length
+    monte_carlo_nights = 4000000 # nights simulated to check the design
 
     [alerts] ...                 # imu_square.monitor.alert_config
     [metrics] ...                # imu_square.monitor.metrics
@@ -48,6 +49,7 @@ from imu_square.monitor.alert_config import AlertsConfig, alerts_from_mapping
 from imu_square.monitor.fields import Table
 from imu_square.monitor.metrics import MetricsConfig, metrics_from_mapping
 from imu_square.textfile import read_text
+from imu_square.units import URAD
 
 EMULATED = "emulated"
 TRIGGERS = ("marker", "motion", "immediate")
@@ -119,10 +121,14 @@ class AlarmSettings:
     step_rad : float
         The change the charts should find quickly (its out-of-control run
         length is reported). [rad]
+    monte_carlo_nights : int
+        Nights simulated to check the designed scheme (its false-alarm rate's
+        relative standard error is about ``sqrt(false_alarm_nights / this)``).
     """
 
     false_alarm_nights: float = 730.0
-    step_rad: float = 10e-6
+    step_rad: float = 10 * URAD
+    monte_carlo_nights: int = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -272,10 +278,11 @@ def monitor_from_mapping(doc, path):
         order=ana.integer("order", 1, 1, 8),
         bootstrap=ana.integer("bootstrap", 200, 0, 10_000),
     )
-    alarm = table("alarms", ("false_alarm_nights", "step_um_per_m"))
+    alarm = table("alarms", ("false_alarm_nights", "step_um_per_m", "monte_carlo_nights"))
     alarms = AlarmSettings(
         false_alarm_nights=alarm.number("false_alarm_nights", 730.0, 10.0, 1e6),
-        step_rad=alarm.number("step_um_per_m", 10.0, 0.0, 1e4, lo_open=True) * 1e-6,
+        step_rad=alarm.number("step_um_per_m", 10.0, 0.0, 1e4, lo_open=True) * URAD,
+        monte_carlo_nights=alarm.integer("monte_carlo_nights", 4_000_000, 100_000, 100_000_000),
     )
     metrics = None
     if "metrics" in doc:

@@ -11,15 +11,16 @@ import re
 import shlex
 from pathlib import Path
 
-# The nightly job's exit code of each state. 2 (a user's mistake), 3 (an
-# incomplete recording) and 130 (interrupted) keep their meaning in every command.
+# The nightly job's exit code of each state, clear of the codes every command
+# shares: 2 (a user's mistake), 3 (an incomplete recording), 4 (writing failed
+# part-way) and 130 (interrupted).
 EXIT_CODES = {
     "ok": 0,
-    "warning": 4,
-    "alarm": 5,
-    "invalid": 6,
-    "stale_baseline": 7,
-    "no_baseline": 8,
+    "warning": 10,
+    "alarm": 11,
+    "invalid": 12,
+    "stale_baseline": 13,
+    "no_baseline": 14,
 }
 _QUIET_STATES = ("ok", "warning", "no_baseline")
 _TIME = re.compile(r"([01]\d|2[0-3]):([0-5]\d)")
@@ -182,8 +183,8 @@ def systemd_units(machine_id, executable, monitor_file, at="02:30", user=None):
         f"ExecStart={command}",
         # a path setting takes the rest of the line: no quotes, only % doubled
         f"WorkingDirectory={str(Path(monitor_file).parent).replace('%', '%%')}",
-        "# ok, warning and no_baseline are success; alarm (5), invalid (6) and",
-        "# stale_baseline (7) leave the unit failed, so systemctl --failed shows them.",
+        "# ok, warning and no_baseline are success; alarm (11), invalid (12) and",
+        "# stale_baseline (13) leave the unit failed, so systemctl --failed shows them.",
         f"SuccessExitStatus={success}",
         "TimeoutStartSec=2h",
         "Nice=5",

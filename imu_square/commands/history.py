@@ -1,0 +1,85 @@
+"""``imu-square history``: a machine's runs and verdicts, its trend chart, a back-up."""
+
+import json
+import sys
+from datetime import UTC, datetime
+
+from imu_square.commands._monitor import add_config_argument, monitor_session
+from imu_square.errors import ImuSquareError
+
+
+def register(sub):
+    """Add the ``history`` subcommand."""
+    p = sub.add_parser(
+        "history",
+        help="a machine's runs and verdicts, its trend chart, or a back-up of the history",
+        description="Print the machine's runs with the monitor's verdict on each (against the "
+        "current baseline), or write them as JSON, or draw the trend chart with the alarm "
+        "limits, the baseline band, anchors, remounts and invalid runs marked. --backup copies "
+        "the whole history safely while it is in use (SQLite's backup API; pg_dump for "
+        "PostgreSQL).",
+    )
+    add_config_argument(p)
+    p.add_argument("--json", action="store_true", help="one JSON object per run on stdout")
+    p.add_argument("--plot", metavar="OUT.png", help="write the trend chart")
+    p.add_argument("--since", metavar="YYYY-MM-DD", help="only runs recorded from this day (UTC)")
+    p.add_argument("--backup", metavar="PATH", help="copy the whole history to PATH")
+    p.set_defaults(func=run)
+
+
+def _since(text):
+    if text is None:
+        return None
+    try:
+        return datetime.strptime(text, "%Y-%m-%d").replace(tzinfo=UTC)
+    except ValueError:
+        raise ImuSquareError(f"--since must be a date YYYY-MM-DD, got {text!r}") from None
+
+
+def run(args):
+    """Print the table (or JSON), draw the chart, or back the history up."""
+    from imu_square.monitor.evaluate import iso, verdict
+    from imu_square.monitor.night import assess_history, night_record
+
+    since = _since(args.since)
+    with monitor_session(args.config) as (config, history):
+        if args.backup:
+            path = history.backup(args.backup)
+            print(f"backed up {history.location} to {path}", file=sys.stderr)
+            return 0
+        assessment = assess_history(config, history)
+        nights = [
+            n
+            for n in assessment.nights
+            if since is None
+            or (
+                n.run.recorded_at_ns is not None and n.run.recorded_at_ns >= since.timestamp() * 1e9
+            )
+        ]
+        print(
+            f"{'run':>5}  {'recorded':20}  {'state':14}  {'change µm/m':>16}  {'θy−θx µm/m':>11}  "
+            f"{'eps_c °':>8}  note",
+            file=sys.stderr,
+        )
+        for n in nights:
+            r = n.run
+            change = (
+                ""
+                if n.change_rad != n.change_rad
+                else f"{n.change_rad * 1e6:+7.1f} ± {n.u_change_rad * 1e6:5.1f}"
+            )
+            sq = "" if r.squareness_rad is None else f"{r.squareness_rad * 1e6:+11.1f}"
+            eps = "" if r.eps_c_rad is None else f"{r.eps_c_rad * 57.29577951308232:8.3f}"
+            print(
+                f"{r.id:>5}  {iso(r.recorded_at_ns):20}  {n.state:14}  {change:>16}  {sq:>11}  "
+                f"{eps:>8}  {n.reason}",
+                file=sys.stderr,
+            )
+            if args.json:
+                print(json.dumps(night_record(assessment, n, verdict(assessment, n))))
+        if args.plot:
+            from imu_square.monitor.plots import plot_trend
+
+            plot_trend(assessment, args.plot)
+            print(f"wrote {args.plot}", file=sys.stderr)
+    return 0

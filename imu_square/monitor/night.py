@@ -1,0 +1,350 @@
+"""One night of the monitor: a recording in, a stored run, a verdict and its record out.
+
+:func:`judge_recording` analyses a recording, stores it in the history (as an
+invalid run with its one-line reason when it cannot be trusted), marks the
+baseline stale on a sensor remount, runs the alarm charts over the history
+and stores the night's verdict. It never prints: the ``nightly`` and
+``replay`` commands report what it returns.
+"""
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from imu_square import __version__
+from imu_square.errors import AnalysisError, ImuSquareError
+from imu_square.monitor.drift import fit_night_drift, power_on_offset_s
+from imu_square.monitor.encoding import file_sha256, first_line
+from imu_square.monitor.evaluate import assess, design_for, iso, verdict
+from imu_square.monitor.rows import EvaluationRow, RunRow
+from imu_square.units import URAD
+
+
+@dataclass(frozen=True)
+class NightOutcome:
+    """What one night gave.
+
+    Attributes
+    ----------
+    run_id : int
+        The run's row in the history.
+    inserted : bool
+        False when the same recording under the same settings was there already.
+    state : str
+        The verdict's state (:data:`~imu_square.monitor.evaluate.STATES`).
+    verdict : str
+        The one line a user reads in the morning.
+    record : dict
+        The night's record for ``--json`` and the alert sinks.
+    assessment : Assessment
+        The machine's whole history as judged now.
+    result : RunResult or None
+        The analysis, None for an invalid run.
+    """
+
+    run_id: int
+    inserted: bool
+    state: str
+    verdict: str
+    record: dict
+    assessment: object
+    result: object = None
+
+
+def analysis_settings(config):
+    """The analysis settings stored with every run (their hash keys a run). [JSON]"""
+    return {"analysis": asdict(config.analysis.options()), "software": __version__}
+
+
+def run_row(config, path, recording=None, result=None, reason=None):
+    """The history row of one recording, valid or invalid.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file.
+    path : str or Path
+        The recording.
+    recording : Recording or None
+        The recording as read (None when it could not be read).
+    result : RunResult or None
+        Its analysis (None for an invalid run).
+    reason : str or None
+        Why the run is invalid.
+
+    Returns
+    -------
+    RunRow
+    """
+    base = {
+        "machine_id": config.machine_id,
+        "recording_path": str(path),
+        "recording_sha256": file_sha256(path),
+        "settings": analysis_settings(config),
+        "recorded_at_ns": None if recording is None else int(recording.time_ns[0]),
+    }
+    temps = {}
+    uptime = None
+    if recording is not None:
+        uptime = power_on_offset_s(recording)
+        if recording.temperature_c is not None and recording.temperature_c.size:
+            t = recording.temperature_c
+            temps = {
+                "temperature_start_c": float(t[0]),
+                "temperature_end_c": float(t[-1]),
+                "temperature_mean_c": float(np.mean(t)),
+            }
+    if result is None:
+        return RunRow(
+            **base, valid=False, invalid_reason=reason, time_since_power_on_s=uptime, **temps
+        )
+    doc = result.to_json_dict()
+    drift = None
+    try:
+        drift = fit_night_drift(result, recording).to_json_dict()
+    except AnalysisError:
+        pass  # too few cycles or a constant regressor: no within-night slope
+    per_cycle = dict(doc["per_cycle"], drift=drift)
+    return RunRow(
+        **base,
+        valid=True,
+        squareness_rad=result.squareness_rad,
+        u_squareness_rad=result.u_squareness_rad,
+        u_squareness_bootstrap_rad=result.u_squareness_bootstrap_rad,
+        dof=float(result.u_squareness_dof),
+        crb_rad=result.crb_rad,
+        theta_x_rad=result.theta_x_rad,
+        theta_y_rad=result.theta_y_rad,
+        eps_c_rad=result.eps_c_rad,
+        u_eps_c_rad=result.u_eps_c_rad,
+        servo_mismatch_rad=result.servo_mismatch_rad,
+        u_servo_mismatch_rad=result.u_servo_mismatch_rad,
+        noise_density_m_s2_rthz=result.noise_density_m_s2_rthz,
+        amp_x_m_s2=result.amp_x_m_s2,
+        amp_y_m_s2=result.amp_y_m_s2,
+        time_since_power_on_s=uptime,
+        cycles_ccw=result.cycles_used["ccw"],
+        cycles_cw=result.cycles_used["cw"],
+        quality={k: v for k, v in doc["quality"].items() if k != "warnings"},
+        warnings=tuple(result.quality["warnings"]),
+        per_cycle=per_cycle,
+        result=doc,
+        **temps,
+    )
+
+
+def analyse_recording(config, path, program=None, complete=True):
+    """Read and analyse a recording, or say in one line why it cannot be trusted.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file (analysis settings).
+    path : str or Path
+        The recording.
+    program : TestProgram, optional
+        The program the monitor expects; a recording of another program is invalid.
+    complete : bool
+        False when the recorder said the recording is incomplete.
+
+    Returns
+    -------
+    recording : Recording or None
+    result : RunResult or None
+    reason : str or None
+        Why the run is invalid; None when it is valid.
+    """
+    import warnings
+
+    from imu_square.io.mcap import read_mcap
+    from imu_square.pipeline.squareness import analyze
+
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            recording = read_mcap(path)
+    except ImuSquareError as exc:
+        return None, None, first_line(exc)
+    cut = [str(w.message) for w in caught if "incomplete MCAP file" in str(w.message)]
+    if cut:
+        return recording, None, first_line(cut[0])
+    if not complete:
+        return recording, None, "the recorder reported an incomplete recording"
+    if program is not None and recording.program is not None and recording.program != program:
+        return (
+            recording,
+            None,
+            ("the recording's program differs from the monitor's: another circle test ran"),
+        )
+    try:
+        result = analyze(recording, config.analysis.options(), program=program)
+    except AnalysisError as exc:
+        return recording, None, first_line(exc)
+    return recording, result, None
+
+
+def stored_design(history, baseline_row, settings):
+    """The alarm design of a baseline, computed once and kept in the history."""
+    from imu_square.monitor.alarms import AlarmDesign
+
+    if baseline_row is None:
+        return None
+    if baseline_row.alarm_design:
+        return AlarmDesign.from_json_dict(baseline_row.alarm_design)
+    runs = [history.run(i) for i in baseline_row.run_ids]
+    design = design_for(baseline_row, runs, settings)
+    history.set_alarm_design(baseline_row.id, design.to_json_dict())
+    return design
+
+
+def assess_history(config, history):
+    """A machine's whole history judged against its current baseline.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file (machine id, alarm settings).
+    history : History
+        The open history.
+
+    Returns
+    -------
+    Assessment
+    """
+    machine = config.machine_id
+    baseline_row = history.current_baseline(machine)
+    design = stored_design(history, baseline_row, config.alarms)
+    anchors = () if baseline_row is None else tuple(history.anchors(baseline_row.id))
+    current = None if baseline_row is None else baseline_row.id
+    earlier = {e.run_id: e for e in history.evaluations(machine) if e.baseline_id != current}
+    return assess(history.runs(machine), baseline_row, design, anchors, earlier)
+
+
+def judge_recording(config, history, path, program=None, complete=True):
+    """Analyse, store and judge one night's recording.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file.
+    history : History
+        The open history.
+    path : str or Path
+        The night's recording.
+    program : TestProgram, optional
+        The program the monitor expects.
+    complete : bool
+        False when the recorder reported an incomplete recording.
+
+    Returns
+    -------
+    NightOutcome
+    """
+    recording, result, reason = analyse_recording(config, path, program, complete)
+    row = run_row(config, path, recording, result, reason)
+    run_id, inserted = history.add_run(row)
+    return judge_stored(config, history, run_id, inserted, result)
+
+
+def judge_stored(config, history, run_id, inserted=True, result=None):
+    """Judge a run already in the history, and store the verdict.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file.
+    history : History
+        The open history.
+    run_id : int
+        The run.
+    inserted : bool
+        Whether the run was stored just now.
+    result : RunResult, optional
+        Its analysis, passed through to the outcome.
+
+    Returns
+    -------
+    NightOutcome
+    """
+    assessment = assess_history(config, history)
+    baseline_row = assessment.baseline_row
+    night = assessment.night_of(run_id)
+    if night.state == "stale_baseline" and baseline_row is not None and not baseline_row.stale:
+        history.mark_baseline_stale(baseline_row.id, night.reason, at_ns=night.run.recorded_at_ns)
+    statistics = {} if night.chart is None else night.chart.to_json_dict()
+    history.add_evaluation(
+        EvaluationRow(
+            run_id=run_id,
+            baseline_id=None if baseline_row is None else baseline_row.id,
+            state=night.state,
+            change_rad=_finite(night.change_rad),
+            u_change_rad=_finite(night.u_change_rad),
+            statistics=statistics,
+        )
+    )
+    line = verdict(assessment, night)
+    record = night_record(assessment, night, line)
+    return NightOutcome(run_id, inserted, night.state, line, record, assessment, result)
+
+
+def night_record(assessment, night, line):
+    """The machine-readable record of a night (``nightly --json``, alerts).
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's assessment.
+    night : Night
+        The night.
+    line : str
+        Its verdict.
+
+    Returns
+    -------
+    dict
+        ``state``, ``verdict``, ``change_urad``, ``u_change_urad``, the run's
+        identity and analysis, the baseline and, when anchored, the absolute
+        machine squareness.
+    """
+    run = night.run
+    base = assessment.baseline_row
+    record = {
+        "machine_id": run.machine_id,
+        "state": night.state,
+        "verdict": line,
+        "change_urad": _urad(night.change_rad),
+        "u_change_urad": _urad(night.u_change_rad),
+        "run_id": run.id,
+        "recording": run.recording_path,
+        "recording_sha256": run.recording_sha256,
+        "recorded_at": iso(run.recorded_at_ns),
+        "valid": run.valid,
+        "invalid_reason": run.invalid_reason,
+        "squareness_urad": _urad(run.squareness_rad),
+        "u_squareness_urad": _urad(run.u_squareness_rad),
+        "eps_c_deg": None if run.eps_c_rad is None else math.degrees(run.eps_c_rad),
+        "warnings": list(run.warnings),
+        "baseline": None
+        if base is None
+        else {
+            "id": base.id,
+            "squareness_urad": base.squareness_mean_rad / URAD,
+            "u_squareness_urad": base.u_squareness_mean_rad / URAD,
+            "eps_c_deg": math.degrees(base.eps_c_rad),
+            "created_at": iso(base.created_at_ns),
+            "stale": base.stale or night.state == "stale_baseline",
+        },
+        "chart": None if night.chart is None else night.chart.to_json_dict(),
+    }
+    if math.isfinite(assessment.anchor_rad) and math.isfinite(night.change_rad):
+        record["machine_squareness_urad"] = (assessment.anchor_rad + night.change_rad) / URAD
+    return record
+
+
+def _finite(x):
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _urad(x):
+    return None if x is None or not math.isfinite(x) else x / URAD

@@ -1,0 +1,152 @@
+"""After a night is judged: the trend chart, the report, the metrics file and the alerts.
+
+Called once the verdict is in the history, so that nothing here can lose the
+run: a sink that fails keeps its alert in the outbox (:mod:`.alerts`), and a
+figure that cannot be drawn is logged, not raised.
+"""
+
+import math
+from dataclasses import dataclass
+from datetime import UTC
+from pathlib import Path
+
+from imu_square.errors import ImuSquareError
+from imu_square.log import logger
+from imu_square.monitor.encoding import datetime_from_ns
+
+
+@dataclass(frozen=True)
+class NightFiles:
+    """What a night wrote besides the history.
+
+    Attributes
+    ----------
+    trend_png, report_html : Path or None
+        The trend chart and the report; None when they could not be written.
+    metrics : Path or None
+        The Prometheus text file, when configured.
+    alerts : AlertReport or None
+        What each sink did with the night's alert.
+    """
+
+    trend_png: Path | None
+    report_html: Path | None
+    metrics: Path | None
+    alerts: object
+
+
+def last_valid_result(assessment, options):
+    """The analysis of the latest valid run whose recording is still on disk, and its path.
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's assessment.
+    options : AnalysisOptions
+        The analysis settings.
+
+    Returns
+    -------
+    result : RunResult or None
+    path : str
+    """
+    from imu_square.io.mcap import read_mcap
+    from imu_square.pipeline.squareness import analyze
+
+    for night in reversed(assessment.nights):
+        run = night.run
+        if run.valid and Path(run.recording_path).is_file():
+            try:
+                return analyze(read_mcap(run.recording_path), options), run.recording_path
+            except ImuSquareError as exc:
+                logger.warning("%s: cannot redraw the last run: %s", run.recording_path, exc)
+    return None, ""
+
+
+def metrics_snapshot(assessment):
+    """The metrics of a machine's assessment (:class:`~.metrics.MetricsSnapshot`)."""
+    from imu_square.monitor.metrics import MetricsSnapshot
+
+    nights = assessment.nights
+    latest = nights[-1] if nights else None
+    valid = [n for n in nights if n.run.valid]
+    judged = [n for n in valid if math.isfinite(n.change_rad)]
+    last_valid = valid[-1] if valid else None
+
+    def when(night):
+        if night is None or night.run.recorded_at_ns is None:
+            return None
+        return datetime_from_ns(night.run.recorded_at_ns).astimezone(UTC)
+
+    return MetricsSnapshot(
+        machine_id=assessment.machine_id,
+        state=latest.state if latest else "no_baseline",
+        runs=len(nights),
+        invalid_runs=len(nights) - len(valid),
+        change_rad=judged[-1].change_rad if judged else None,
+        u_change_rad=judged[-1].u_change_rad if judged else None,
+        eps_c_rad=last_valid.run.eps_c_rad if last_valid else None,
+        u_eps_c_rad=last_valid.run.u_eps_c_rad if last_valid else None,
+        last_run_at=when(latest),
+        last_valid_run_at=when(last_valid),
+    )
+
+
+def write_night_outputs(config, outcome, out_dir, alert=True):
+    """Draw the trend chart and the report, write the metrics, send the alert.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file.
+    outcome : NightOutcome
+        The judged night.
+    out_dir : Path
+        Folder for the chart and the report.
+    alert : bool
+        Whether to send the night's alert (a replay of old nights does not).
+
+    Returns
+    -------
+    NightFiles
+    """
+    from imu_square.monitor.plots import plot_trend
+    from imu_square.monitor.report import render_report, write_report
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    assessment = outcome.assessment
+    trend = out_dir / f"{config.machine_id}-trend.png"
+    report = out_dir / f"{config.machine_id}-report.html"
+    try:
+        plot_trend(assessment, trend)
+    except (OSError, ValueError) as exc:
+        logger.warning("%s: trend chart not written: %s", trend, exc)
+        trend = None
+    try:
+        last, title = last_valid_result(assessment, config.analysis.options())
+        write_report(report, render_report(assessment, last, title))
+    except (OSError, ValueError, ImuSquareError) as exc:
+        logger.warning("%s: report not written: %s", report, exc)
+        report = None
+    metrics = None
+    if config.metrics is not None and config.metrics.textfile is not None:
+        from imu_square.monitor.metrics import write_metrics
+
+        try:
+            metrics = write_metrics(config.metrics.textfile, metrics_snapshot(assessment))
+        except ImuSquareError as exc:
+            logger.warning("%s", exc)
+    alerts = None
+    if alert:
+        from imu_square.monitor.alerts import send_alerts
+
+        alerts = send_alerts(
+            config.alerts,
+            outcome.record,
+            machine_id=config.machine_id,
+            state=outcome.state,
+            verdict=outcome.verdict,
+            outbox_dir=config.outbox_dir(),
+        )
+    return NightFiles(trend, report, metrics, alerts)

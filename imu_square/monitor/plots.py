@@ -1,0 +1,171 @@
+"""The monitor's figures: the trend chart and the sensor's state over time.
+
+The trend chart shows every night's change since the baseline with its
+standard uncertainty, the alarm design's Shewhart limits (``+-L u`` of each
+night), the baseline's own band, the baseline's runs, anchors, remounts and
+invalid runs, and below it the EWMA and CUSUM statistics with their limits,
+so a reader can see why a night was judged as it was.
+"""
+
+import math
+
+import numpy as np
+
+from imu_square.monitor.encoding import datetime_from_ns
+from imu_square.units import URAD
+
+_STATE_STYLE = {
+    "ok": ("tab:blue", "o"),
+    "warning": ("tab:orange", "D"),
+    "alarm": ("tab:red", "s"),
+    "stale_baseline": ("tab:purple", "v"),
+}
+
+
+def _dates(nights):
+    return [datetime_from_ns(n.run.recorded_at_ns) for n in nights]
+
+
+def plot_trend(assessment, path, title=""):
+    """Write the trend chart of a machine's assessment as a PNG.
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's history judged against its current baseline.
+    path : str or Path
+        PNG file to write.
+    title : str
+        Title; the machine id if empty.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.dates as mdates
+    import matplotlib.pyplot as plt
+
+    nights = [n for n in assessment.nights if n.run.recorded_at_ns is not None]
+    design = assessment.design
+    fig, (top, bottom) = plt.subplots(
+        2, 1, figsize=(11, 7.5), sharex=True, height_ratios=(3, 2), constrained_layout=True
+    )
+    base = assessment.baseline_row
+    if base is not None and base.first_run_at_ns and base.last_run_at_ns:
+        for ax in (top, bottom):
+            ax.axvspan(
+                datetime_from_ns(base.first_run_at_ns),
+                datetime_from_ns(base.last_run_at_ns),
+                color="tab:green",
+                alpha=0.12,
+                label="baseline runs" if ax is top else None,
+            )
+        band = base.u_squareness_mean_rad / abs(math.cos(2 * base.eps_c_rad)) / URAD
+        top.axhspan(-band, band, color="tab:green", alpha=0.2, label=f"baseline ±u ({band:.1f})")
+    top.axhline(0.0, color="black", lw=0.8)
+    judged = [n for n in nights if math.isfinite(n.change_rad)]
+    for state, (colour, marker) in _STATE_STYLE.items():
+        sel = [n for n in judged if n.state == state]
+        if sel:
+            top.errorbar(
+                _dates(sel),
+                [n.change_rad / URAD for n in sel],
+                yerr=[n.u_change_rad / URAD for n in sel],
+                fmt=marker,
+                color=colour,
+                ms=4,
+                capsize=2,
+                lw=0.8,
+                label=state,
+            )
+    charted = [n for n in judged if n.chart is not None]
+    if design is not None and charted:
+        dates = _dates(charted)
+        lim = np.array([design.shewhart.limit * n.chart.u_change_rad / URAD for n in charted])
+        top.step(dates, lim, where="mid", color="tab:red", lw=0.8, ls="--", label="Shewhart limit")
+        top.step(dates, -lim, where="mid", color="tab:red", lw=0.8, ls="--")
+        bottom.plot(dates, [n.chart.ewma for n in charted], "-", color="tab:cyan", label="EWMA")
+        bottom.plot(
+            dates, [n.chart.cusum_pos for n in charted], "-", color="tab:brown", label="CUSUM +"
+        )
+        bottom.plot(
+            dates, [-n.chart.cusum_neg for n in charted], "-", color="tab:olive", label="CUSUM −"
+        )
+        for value, colour, name in (
+            (design.ewma.limit, "tab:cyan", "EWMA limit"),
+            (design.cusum.limit, "tab:brown", "CUSUM limit"),
+        ):
+            bottom.axhline(value, color=colour, ls="--", lw=0.8, label=name)
+            bottom.axhline(-value, color=colour, ls="--", lw=0.8)
+    invalid = [n for n in nights if n.state == "invalid"]
+    if invalid:
+        y0 = top.get_ylim()[0]
+        top.plot(_dates(invalid), [y0] * len(invalid), "x", color="grey", label="invalid run")
+    stale = [n for n in nights if n.state == "stale_baseline"]
+    if stale:
+        top.axvline(_dates(stale[:1])[0], color="tab:purple", ls=":", label="sensor remounted")
+    if math.isfinite(assessment.anchor_rad):
+        offset = assessment.anchor_rad / URAD
+        right = top.secondary_yaxis("right", functions=(lambda y: y + offset, lambda y: y - offset))
+        right.set_ylabel("machine squareness (anchored) [µm/m]")
+    top.set_ylabel("change since the baseline [µm/m]")
+    top.set_title(title or f"machine {assessment.machine_id}: squareness change")
+    top.legend(fontsize=7, ncol=3, loc="upper left")
+    top.grid(alpha=0.3)
+    bottom.set_ylabel("chart statistic [z units]")
+    bottom.set_title("EWMA and CUSUM on z = change / its uncertainty")
+    bottom.legend(fontsize=7, ncol=4, loc="upper left")
+    bottom.grid(alpha=0.3)
+    bottom.xaxis.set_major_formatter(mdates.ConciseDateFormatter(mdates.AutoDateLocator()))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_sensor(assessment, path):
+    """Write eps_c and the sensor temperature over the nights as a PNG.
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's history.
+    path : str or Path
+        PNG file to write.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.dates as mdates
+    import matplotlib.pyplot as plt
+
+    valid = [n for n in assessment.nights if n.run.valid and n.run.recorded_at_ns is not None]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(11, 5), sharex=True, constrained_layout=True)
+    if valid:
+        top.errorbar(
+            _dates(valid),
+            [math.degrees(n.run.eps_c_rad) for n in valid],
+            yerr=[math.degrees(n.run.u_eps_c_rad) for n in valid],
+            fmt="o",
+            ms=3,
+            capsize=2,
+            color="tab:green",
+        )
+    base = assessment.baseline_row
+    if base is not None:
+        top.axhline(math.degrees(base.eps_c_rad), color="black", lw=0.8, label="baseline eps_c")
+        top.legend(fontsize=7)
+    top.set_ylabel("eps_c [deg]")
+    top.set_title("sensor rotation about Z (a jump is a remount)")
+    top.grid(alpha=0.3)
+    temps = [n for n in valid if n.run.temperature_mean_c is not None]
+    if temps:
+        bottom.plot(_dates(temps), [n.run.temperature_mean_c for n in temps], "o-", ms=3)
+        bottom.set_ylabel("sensor temperature [°C]")
+        bottom.set_title("sensor temperature, mean over each run")
+    else:
+        up = [n for n in valid if n.run.time_since_power_on_s is not None]
+        bottom.plot(_dates(up), [n.run.time_since_power_on_s / 60 for n in up], "o", ms=3)
+        bottom.set_ylabel("sensor on for [min]")
+        bottom.set_title("time since the sensor's power-on at each run (no temperature channel)")
+    bottom.grid(alpha=0.3)
+    bottom.xaxis.set_major_formatter(mdates.ConciseDateFormatter(mdates.AutoDateLocator()))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
