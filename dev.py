@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Set up and run imu-square from a fresh checkout with nothing but Python 3.11+.
 
-    python3 dev.py nightly [ARGS...]   # a full nightly run on the emulated sensor
+    python3 dev.py nightly [ARGS...]   # the monitor's nightly run on a demonstration machine
     python3 dev.py test [PYTEST ARGS]  # the whole test suite
     python3 dev.py lint                # ruff check and format check
     python3 dev.py run ARGS...         # any imu-square command
@@ -50,7 +50,8 @@ def main(argv):
     _ensure_env()
     what, rest = argv[0], argv[1:]
     if what == "nightly":
-        return _run([str(BIN / "imu-square"), "nightly", *rest])
+        # Without arguments: the demonstration machine (its history seeded on the first call).
+        return _run([str(BIN / "imu-square"), "nightly", *(rest or ["--demo", "imu-square-demo"])])
     if what == "run":
         return _run([str(BIN / "imu-square"), *rest])
     if what == "lint":

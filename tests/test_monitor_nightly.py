@@ -1,10 +1,10 @@
 """The monitor end to end through the CLI: real recordings, a real SQLite history.
 
-A low-noise sensor (0.5 µg/√Hz at 500 Hz) on a short brisk program (r = 25 mm
-at 9000 mm/min, 5 cycles each way) makes one night's sigma about 2.5 µm/m, so
-a 10 µm/m degradation is four sigma: the designed charts must find it within
-a few nights, and a clean sequence must raise no alarm. The baseline and its
-alarm design (the slow part) are made once and copied into each test.
+A low-noise sensor on a brisk program (tests/monitor_rig.py) makes one night's
+sigma about 2.5 µm/m, so a 10 µm/m degradation is four sigma: the designed
+charts must find it within a few nights, and a clean sequence must raise no
+alarm. The baseline and its alarm design (the slow part) are made once and
+copied into each test.
 """
 
 import json
@@ -13,106 +13,30 @@ import shutil
 import subprocess
 import sys
 from dataclasses import replace
-from datetime import UTC, datetime, timedelta
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
+from monitor_rig import ALPHA, SENSOR, START, copy_base, judge, make_base, night
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
 from imu_square.monitor.schedule import EXIT_CODES
 from imu_square.monitor.store import open_history
 from imu_square.program import program_from_mapping
-from imu_square.simulate.geometry import Geometry
-from imu_square.simulate.machine import MachineModel
 from imu_square.simulate.run import simulate_run
-from imu_square.simulate.sensor import SensorModel
-
-PROGRAM = program_from_mapping(
-    {
-        "radius_mm": 25.0,
-        "feed_mm_per_min": 9000.0,
-        "cycles_per_direction": 5,
-        "dwell_s": 0.5,
-    }
-)
-SENSOR = SensorModel(
-    sample_rate_hz=500.0,
-    noise_density_m_s2_rthz=0.5e-6 * 9.80665,
-    eps_c_rad=math.radians(2.1),
-    beta_rad=40e-6,
-)
-ALPHA = 20e-6
-START = datetime(2026, 9, 1, 2, 30, tzinfo=UTC)
-MONITOR = """\
-[monitor]
-machine_id = "m1"
-history = "history.db"
-data_dir = "data"
-
-[program]
-file = "{program}"
-
-[analysis]
-bootstrap = 0
-
-[alarms]
-false_alarm_nights = 730
-step_um_per_m = 10.0
-monte_carlo_nights = 200000
-
-[alerts.json_file]
-path = "data/alert.json"
-states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]
-"""
-
-
-def night(folder, day, alpha=ALPHA, sensor=SENSOR, seed=None):
-    """Simulate one night's recording into ``folder``; return its path."""
-    machine = MachineModel(
-        geometry=Geometry(machine_squareness_rad=alpha), tau_x_s=2e-3, tau_y_s=2.5e-3
-    )
-    when = START + timedelta(days=day)
-    rec, _ = simulate_run(
-        PROGRAM,
-        machine,
-        sensor,
-        seed=1000 + day if seed is None else seed,
-        t0_ns=int(when.timestamp() * 1e9),
-        lead_in_s=1.0,
-        lead_out_s=1.0,
-    )
-    path = folder / f"night-{day:03d}.mcap"
-    write_mcap(rec, path)
-    return path
-
-
-def judge(config, path, capsys):
-    """``imu-square nightly --config C --recording P --json``: exit code and record."""
-    code = main(["nightly", "--config", str(config), "--recording", str(path), "--json"])
-    out = capsys.readouterr().out
-    return code, json.loads(out.strip().splitlines()[-1])
 
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
     """A monitor folder with a history holding a 5-night baseline and its alarm design."""
-    folder = tmp_path_factory.mktemp("monitor")
-    (folder / "program.toml").write_text(PROGRAM.to_toml())
-    (folder / "monitor.toml").write_text(MONITOR.format(program=folder / "program.toml"))
-    runs = [str(night(folder, d)) for d in range(5)]
-    assert main(["baseline", "set", "--config", str(folder / "monitor.toml"), *runs]) == 0
-    return folder
+    return make_base(tmp_path_factory.mktemp("monitor"))
 
 
 @pytest.fixture
 def rig(base, tmp_path):
     """A copy of the baseline's monitor folder for one test."""
-    for name in ("program.toml", "monitor.toml"):
-        shutil.copy(base / name, tmp_path / name)
-    with open_history(base / "history.db") as h:
-        h.backup(tmp_path / "history.db")
-    return tmp_path
+    return copy_base(base, tmp_path)
 
 
 @pytest.mark.slow
@@ -218,3 +142,32 @@ def test_two_nightly_processes_on_one_history_both_land(rig):
         assert {p.name for p in paths} <= names
         judged = {e.run_id for e in h.evaluations("m1")}
         assert {r.id for r in h.runs("m1") if Path(r.recording_path) in paths} <= judged
+
+
+@pytest.mark.slow
+def test_a_night_through_the_emulated_board_ends_in_a_verdict(rig, capsys):
+    """The nightly job as cron runs it: record through a pty, judge, chart, report, exit."""
+    (rig / "machine.toml").write_text(
+        '[machine]\nname = "m1"\n[geometry]\nmachine_squareness_um_per_m = 20.0\n'
+        "[servo_mismatch]\ntau_x_ms = 2.0\ntau_y_ms = 2.5\n"
+    )
+    (rig / "sensor.toml").write_text(
+        "[sensor]\nsample_rate_hz = 500.0\nnoise_density_ug_rthz = 0.5\neps_c_deg = 2.1\n"
+        "beta_urad = 40.0\n"
+    )
+    text = (rig / "monitor.toml").read_text()
+    (rig / "monitor.toml").write_text(
+        text + '\n[sensor]\nport = "emulated"\n\n[emulated]\nmachine = "machine.toml"\n'
+        'sensor = "sensor.toml"\nspeed = 20.0\n'
+    )
+    code = main(["nightly", "--config", str(rig / "monitor.toml"), "--json"])
+    out, err = capsys.readouterr()
+    record = json.loads(out.strip().splitlines()[-1])
+    assert record["state"] in ("ok", "warning") and code == EXIT_CODES[record["state"]]
+    assert abs(record["change_urad"]) < 4 * record["u_change_urad"]
+    assert record["recording"].startswith(str(rig / "data" / "m1-"))
+    assert "squareness unchanged" in err or "may be changing" in err
+    for name in ("m1-trend.png", "m1-report.html"):
+        assert (rig / "data" / name).stat().st_size > 10_000
+    assert main(["nightly", "--config", str(rig / "monitor.toml"), "--check"]) == 0
+    assert "ok" in capsys.readouterr().err

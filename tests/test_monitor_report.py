@@ -1,0 +1,145 @@
+"""The report, the history and the baseline commands on a small real history.
+
+The report is opened in a real headless Chromium (Debian's chromium, installed
+by .ci/run): a copy of the page gets a few lines of script that record, once
+the page has loaded, which images decoded and which sections have a height;
+``--dump-dom`` prints the page with those marks.
+"""
+
+import base64
+import json
+import re
+import shutil
+import subprocess
+
+import pytest
+from monitor_rig import ALPHA, judge, make_base, night
+
+from imu_square.cli import main
+from imu_square.monitor.report import SECTIONS
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+PROBE = """<script>
+window.addEventListener("load", () => {
+  const imgs = [...document.images];
+  const ok = imgs.filter((i) => i.complete && i.naturalWidth > 100 && i.naturalHeight > 100);
+  const shown = [...document.querySelectorAll("section")].filter((s) => s.offsetHeight > 20);
+  document.body.dataset.images = String(imgs.length);
+  document.body.dataset.imagesOk = String(ok.length);
+  document.body.dataset.sections = shown.map((s) => s.id).join(",");
+});
+</script></body>"""
+
+
+@pytest.fixture(scope="module")
+def machine(tmp_path_factory):
+    """A history with a 3-night baseline, an anchor, 3 judged nights and an invalid one."""
+    folder = make_base(tmp_path_factory.mktemp("report"), nights=3)
+    config = folder / "monitor.toml"
+    assert main(["baseline", "anchor", "--config", str(config), "--ballbar", "21.5"]) == 0
+    for day in (3, 4, 5):
+        code, record = judge(config, night(folder, day), None)
+        assert record["state"] in ("ok", "warning") and code in (0, 10)
+        # the anchored baseline adds the absolute machine squareness
+        assert record["machine_squareness_urad"] == pytest.approx(
+            21.5 + record["change_urad"], abs=1e-9
+        )
+    junk = folder / "junk.mcap"
+    junk.write_bytes(b"not a recording")
+    code, record = judge(config, junk, None)
+    assert record["state"] == "invalid" and code == 12
+    return folder
+
+
+@pytest.mark.slow
+def test_report_is_self_contained_and_renders_in_a_real_browser(machine, tmp_path):
+    out = tmp_path / "report.html"
+    assert main(["report", "--config", str(machine / "monitor.toml"), "-o", str(out)]) == 0
+    html = out.read_text(encoding="utf-8")
+    for section in SECTIONS:
+        assert f'<section id="{section}">' in html
+    images = re.findall(r'src="data:image/png;base64,([^"]+)"', html)
+    assert len(images) == 3  # trend, last run (Fig. 5), sensor
+    for data in images:
+        png = base64.b64decode(data)
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000
+    assert not re.search(r'(src|href)="(?!data:)', html), "the page must not load anything"
+    assert "anchor by ballbar" in html and "+21.5 µm/m" in html
+    if CHROMIUM is None:
+        pytest.skip("no chromium to open the report (Debian package chromium; .ci/run installs it)")
+    probed = tmp_path / "probed.html"
+    probed.write_text(html.replace("</body>", PROBE), encoding="utf-8")
+    proc = subprocess.run(
+        [
+            CHROMIUM,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--virtual-time-budget=10000",
+            "--dump-dom",
+            probed.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    body = re.search(r"<body([^>]*)>", proc.stdout)
+    assert body, proc.stderr[-2000:]
+    marks = dict(re.findall(r'data-([a-z-]+)="([^"]*)"', body.group(1)))
+    assert marks["images"] == "3" and marks["images-ok"] == "3", marks
+    assert set(marks["sections"].split(",")) == set(SECTIONS), marks
+
+
+@pytest.mark.slow
+def test_history_table_json_plot_since_and_backup(machine, tmp_path, capsys):
+    config = str(machine / "monitor.toml")
+    assert main(["history", "--config", config, "--json", "--plot", str(tmp_path / "t.png")]) == 0
+    captured = capsys.readouterr()
+    records = [json.loads(line) for line in captured.out.splitlines()]
+    assert [r["state"] for r in records][:3] == ["ok", "ok", "ok"]  # the baseline's nights
+    assert records[-1]["state"] == "invalid" and records[-1]["invalid_reason"]
+    assert (tmp_path / "t.png").read_bytes()[:4] == b"\x89PNG"
+    assert "invalid" in captured.err and "baseline" in captured.err
+    assert main(["history", "--config", config, "--json", "--since", "2026-09-05"]) == 0
+    later = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert len(later) == 2 and all(r["recorded_at"] >= "2026-09-05" for r in later)
+    assert main(["history", "--config", config, "--backup", str(tmp_path / "copy.db")]) == 0
+    capsys.readouterr()
+    assert main(["history", "--config", config, "--since", "5 Sept"]) == 2
+    assert "--since must be a date YYYY-MM-DD, got '5 Sept'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_baseline_show_and_anchor_by_diagonals(machine, tmp_path, capsys):
+    config = str(machine / "monitor.toml")
+    assert main(["baseline", "show", "--config", config, "--json"]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert len(shown["run_ids"]) == 3 and shown["alarm_design"]["arl0_nights"] == 730
+    assert shown["anchors"][0]["machine_squareness_urad"] == pytest.approx(21.5)
+    # ISO 230-6 face diagonals of 600 x 400 mm on a machine of +20 µm/m:
+    # S = D0 (D1 - D2) / (2 X Y), so D1 - D2 = 2 X Y S / D0
+    d0 = (600**2 + 400**2) ** 0.5
+    diff = 2 * 600 * 400 * ALPHA / d0
+    code = main(
+        [
+            "baseline", "anchor", "--config", config,
+            "--diagonals", f"{d0 + diff / 2:.6f}", f"{d0 - diff / 2:.6f}",
+            "--travel-mm", "600", "400",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    capsys.readouterr()
+    assert main(["baseline", "show", "--config", config, "--json"]) == 0
+    anchors = json.loads(capsys.readouterr().out)["anchors"]
+    assert anchors[-1]["method"] == "diagonals"
+    assert anchors[-1]["machine_squareness_urad"] == pytest.approx(20.0, abs=0.01)
+    bad = ["baseline", "anchor", "--config", config, "--diagonals", "700", "700"]
+    assert main([*bad, "--travel-mm", "600", "400"]) == 2
+    assert "more than 0.1 % off (check the units: mm)" in capsys.readouterr().err
+    assert main(bad) == 2
+    assert "--diagonals needs --travel-mm" in capsys.readouterr().err
