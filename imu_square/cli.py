@@ -41,18 +41,39 @@ EXIT_WRITE_FAILED = 4
 EXIT_INTERRUPTED = 130
 
 
-def _command_modules():
-    packages = [importlib.import_module("imu_square.commands")]
+def commands():
+    """Every subcommand's name and module, without importing any command module.
+
+    Returns
+    -------
+    dict of str to str
+        ``{name: module}``, sorted by name: this package's ``commands`` modules
+        (``import_`` is ``import``) and the ``imu_square.commands`` entry points,
+        one per command, by which other packages (``acquisition``) add theirs.
+    """
+    out = {}
+    package = importlib.import_module("imu_square.commands")
+    for info in pkgutil.iter_modules(package.__path__):
+        if not info.name.startswith("_"):
+            out[info.name.rstrip("_")] = f"{package.__name__}.{info.name}"
     for ep in entry_points(group="imu_square.commands"):
-        packages.append(ep.load())
-    for package in packages:
-        for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
-            if not info.name.startswith("_"):
-                yield importlib.import_module(f"{package.__name__}.{info.name}")
+        out[ep.name] = ep.value
+    return dict(sorted(out.items()))
 
 
-def build_parser():
-    """The argument parser with every subcommand registered."""
+def build_parser(only=None):
+    """The argument parser with every subcommand registered, or only ``only``.
+
+    Parameters
+    ----------
+    only : str, optional
+        The one command to register (and so to import): a command pays only
+        for its own imports at start-up.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = argparse.ArgumentParser(
         prog="imu-square",
         description="Machine-tool squareness from a table-mounted accelerometer.",
@@ -65,8 +86,9 @@ def build_parser():
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more status output")
     parser.add_argument("-q", "--quiet", action="store_true", help="errors only")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module in _command_modules():
-        module.register(sub)
+    for name, module in commands().items():
+        if only is None or name == only:
+            importlib.import_module(module).register(sub)
     return parser
 
 
@@ -87,7 +109,9 @@ def main(argv=None):
     int
         The exit code.
     """
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    named = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser(only=named if named in commands() else None)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_help(sys.stderr)

@@ -22,7 +22,6 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from imu_square.errors import ConfigError, ImuSquareWarning
 
@@ -63,6 +62,8 @@ def _ramp_inverse(q, profile):
         return math.sqrt(2.0 * q)
     if q <= 0.0:
         return 0.0
+    from scipy.optimize import brentq  # here: the CLI's start-up never needs scipy.optimize
+
     return brentq(lambda u: float(ramp_fraction(u, profile)[0]) - q, 0.0, 1.0, xtol=1e-15)
 
 

@@ -1,0 +1,50 @@
+"""Start-up pays only for the command run: no matplotlib, scipy.optimize or acquisition
+unless that command needs them (issue 10: 0.8 s of CPU and 75 MiB for every command before)."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from imu_square.cli import commands
+
+HEAVY = ("matplotlib", "scipy.optimize", "acquisition")
+# what each command may pull in at start-up, because registering it needs it
+ALLOWED = {"reference": {"scipy.optimize"}, "compare": {"scipy.optimize"}}
+ACQUISITION = {"record", "emulate", "nightly"}
+
+PROBE = """
+import json, sys
+from imu_square.cli import build_parser
+build_parser(only=sys.argv[1])
+heavy = sorted({h for h in HEAVY for m in sys.modules if m == h or m.startswith(h + ".")})
+print(json.dumps(heavy))
+""".replace("HEAVY", repr(HEAVY))
+
+
+def test_every_command_is_found_without_importing_it():
+    names = commands()
+    assert {"analyze", "import", "nightly", "record", "history", "baseline", "init"} <= set(names)
+    assert names["import"] == "imu_square.commands.import_"
+    assert names["nightly"] == "acquisition.commands.nightly"
+
+
+@pytest.mark.parametrize("name", sorted(commands()))
+def test_a_command_imports_only_what_it_needs(name):
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE, name], capture_output=True, text=True, check=True
+    ).stdout
+    heavy = set(json.loads(out))
+    allowed = ALLOWED.get(name, set()) | ({"acquisition"} if name in ACQUISITION else set())
+    assert heavy <= allowed, f"{name} imports {sorted(heavy - allowed)} at start-up"
+
+
+def test_importing_the_package_is_light():
+    out = subprocess.run(
+        [sys.executable, "-c", "import imu_square, sys; print(sorted(sys.modules))"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert "numpy" not in out and "matplotlib" not in out and "acquisition" not in out
