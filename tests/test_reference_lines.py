@@ -135,3 +135,16 @@ def test_biaxial_squareness_with_each_reference_line(method, factor):
 def test_bad_arguments(call, match):
     with pytest.raises(ImuSquareError, match=match):
         call()
+
+
+def test_minimum_zone_follows_a_steep_added_line_to_rounding():
+    # Found by hypothesis: with a steep trend dominating HiGHS's scaling, the LP alone
+    # placed the slope 2e-10 off; the hull-edge polish makes it exact.
+    s = np.array([0.0, 0.5, 0.75, 0.25, 0.375, 0.125, -0.75, 1.0, -0.5, -1.0])
+    r = np.zeros(10)
+    r[7], r[8], r[9] = 1e-6, 1.5e-5, -1.953125e-9
+    base = reference_line(s, r, "minimum_zone")
+    b = 109.0 * np.ptp(r)
+    moved = reference_line(s, r + b * s, "minimum_zone")
+    assert moved.slope == pytest.approx(base.slope + b, abs=1e-12 * b)
+    assert moved.zone_m == pytest.approx(base.zone_m, rel=1e-9)

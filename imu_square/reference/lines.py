@@ -28,6 +28,7 @@ References
    paper TE328 (2013), Fig. 1.
 """
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,19 +105,37 @@ def _minimum_zone(s, r):
     )
     if res.status != 0:  # a bounded feasible LP: cannot happen short of a HiGHS failure
         raise ImuSquareError(f"minimum-zone line: linprog failed: {res.message}")
-    a, b, t = res.x
-    # Polish to rounding: the optimum is a line through two of the readings that
-    # touch the zone (equioscillation); HiGHS places it only to its tolerance.
-    touching = np.flatnonzero(np.abs(np.abs(v - a - b * u) - t) <= 1e-6 * max(t, 1e-12))
-    for i in touching:
-        for j in touching:
-            if u[j] > u[i]:
-                bj = (v[j] - v[i]) / (u[j] - u[i])
-                dj = v - bj * u
-                if np.ptp(dj) < np.ptp(v - b * u):
-                    b, a = bj, 0.5 * (dj.max() + dj.min())
+    a, b, _ = res.x
+    # Polish to rounding: the optimal strip is parallel to an edge of the readings'
+    # convex hull, and HiGHS places it only to its tolerance (1e-7 of a scaled trace,
+    # too coarse when a steep trend dominates the scaling). Try every hull edge.
+    for slope_edge in _hull_edge_slopes(u, v):
+        d = v - slope_edge * u
+        if np.ptp(d) < np.ptp(v - b * u):
+            b, a = slope_edge, 0.5 * (d.max() + d.min())
     slope = b * r_scale / s_scale
     return slope, r0 + a * r_scale - slope * s0
+
+
+def _hull_edge_slopes(u, v):
+    """Slopes of the edges of the lower and upper convex hulls of points ``(u, v)``."""
+    order = np.lexsort((v, u))
+    pts = np.column_stack([u[order], v[order]])
+    slopes = []
+    for sign in (1.0, -1.0):  # lower hull, then upper hull (monotone chain)
+        hull = []
+        for p in pts:
+            while len(hull) >= 2:
+                (x1, y1), (x2, y2) = hull[-2], hull[-1]
+                if sign * ((x2 - x1) * (p[1] - y1) - (y2 - y1) * (p[0] - x1)) <= 0:
+                    hull.pop()
+                else:
+                    break
+            hull.append(p)
+        slopes += [
+            (q[1] - p[1]) / (q[0] - p[0]) for p, q in itertools.pairwise(hull) if q[0] > p[0]
+        ]
+    return slopes
 
 
 def reference_line(position, reading, method="least_squares"):
