@@ -24,6 +24,13 @@ def register(sub):
     p.add_argument("--plot", metavar="OUT.png", help="write the trend chart")
     p.add_argument("--since", metavar="YYYY-MM-DD", help="only runs recorded from this day (UTC)")
     p.add_argument("--backup", metavar="PATH", help="copy the whole history to PATH")
+    p.add_argument(
+        "--compare",
+        nargs=2,
+        metavar=("A", "B"),
+        help="two histories (files or postgresql:// URLs) side by side, run by run (the same "
+        "recording by its SHA-256), e.g. one replayed under other analysis settings",
+    )
     p.set_defaults(func=run)
 
 
@@ -37,7 +44,9 @@ def _since(text):
 
 
 def run(args):
-    """Print the table (or JSON), draw the chart, or back the history up."""
+    """Print the table (or JSON), draw the chart, back the history up, or compare two."""
+    if args.compare:
+        return _compare(args)
     from imu_square.monitor.evaluate import iso, verdict
     from imu_square.monitor.night import assess_history, night_record
 
@@ -83,3 +92,76 @@ def run(args):
             plot_trend(assessment, args.plot)
             print(f"wrote {args.plot}", file=sys.stderr)
     return 0
+
+
+def _compare(args):
+    """Two histories of the machine side by side, by recording."""
+    import math
+
+    import numpy as np
+
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.evaluate import iso
+    from imu_square.monitor.store import open_history
+    from imu_square.units import URAD
+
+    machine = read_monitor(args.config).machine_id
+    tables = []
+    for location in args.compare:
+        with open_history(location) as h:
+            states = {e.run_id: e.state for e in h.evaluations(machine)}
+            tables.append({r.recording_sha256: (r, states.get(r.id, "")) for r in h.runs(machine)})
+    a, b = tables
+    both = sorted(set(a) & set(b), key=lambda k: (a[k][0].recorded_at_ns or 0, k))
+    print(
+        f"{'recorded':20}  {'A θy−θx':>9}  {'B θy−θx':>9}  {'B − A':>7}  {'A state':14}  "
+        f"{'B state':14}  (µm/m)",
+        file=sys.stderr,
+    )
+    diffs = []
+    for key in both:
+        (ra, sa), (rb, sb) = a[key], b[key]
+        va = math.nan if ra.squareness_rad is None else ra.squareness_rad / URAD
+        vb = math.nan if rb.squareness_rad is None else rb.squareness_rad / URAD
+        if math.isfinite(va) and math.isfinite(vb):
+            diffs.append(vb - va)
+        print(
+            f"{iso(ra.recorded_at_ns):20}  {va:+9.2f}  {vb:+9.2f}  {vb - va:+7.2f}  {sa:14}  "
+            f"{sb:14}",
+            file=sys.stderr,
+        )
+        if args.json:
+            print(
+                json.dumps(
+                    {
+                        "recording_sha256": key,
+                        "recorded_at": iso(ra.recorded_at_ns),
+                        "a_squareness_urad": None if math.isnan(va) else va,
+                        "b_squareness_urad": None if math.isnan(vb) else vb,
+                        "a_u_squareness_urad": _urad(ra.u_squareness_rad),
+                        "b_u_squareness_urad": _urad(rb.u_squareness_rad),
+                        "a_state": sa,
+                        "b_state": sb,
+                        "a_valid": ra.valid,
+                        "b_valid": rb.valid,
+                    }
+                )
+            )
+    d = np.array(diffs)
+    only = (len(set(a) - set(b)), len(set(b) - set(a)))
+    validity = sum(a[k][0].valid != b[k][0].valid for k in both)
+    text = (
+        f"{len(both)} recordings in both, {only[0]} only in A, {only[1]} only in B; "
+        f"{validity} valid in one and not the other"
+    )
+    if d.size:
+        sd = f", sd {np.std(d, ddof=1):.2f}" if d.size > 1 else ""
+        text += f"; B − A: mean {np.mean(d):+.2f}{sd}, largest {np.max(np.abs(d)):.2f} µm/m"
+    print(text, file=sys.stderr)
+    return 0
+
+
+def _urad(x):
+    from imu_square.units import URAD
+
+    return None if x is None else x / URAD

@@ -8,14 +8,14 @@ and stores the night's verdict. It never prints: the ``nightly`` and
 """
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from imu_square import __version__
 from imu_square.errors import AnalysisError, ImuSquareError
 from imu_square.monitor.drift import fit_night_drift, power_on_offset_s
-from imu_square.monitor.encoding import file_sha256, first_line
+from imu_square.monitor.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.evaluate import assess, design_for, iso, verdict
 from imu_square.monitor.rows import EvaluationRow, RunRow
 from imu_square.units import URAD
@@ -57,7 +57,7 @@ def analysis_settings(config):
     return {"analysis": asdict(config.analysis.options()), "software": __version__}
 
 
-def run_row(config, path, recording=None, result=None, reason=None):
+def run_row(config, path, recording=None, result=None, reason=None, sha256=None):
     """The history row of one recording, valid or invalid.
 
     Parameters
@@ -72,6 +72,8 @@ def run_row(config, path, recording=None, result=None, reason=None):
         Its analysis (None for an invalid run).
     reason : str or None
         Why the run is invalid.
+    sha256 : str, optional
+        The file's SHA-256, when the caller has it already.
 
     Returns
     -------
@@ -80,7 +82,7 @@ def run_row(config, path, recording=None, result=None, reason=None):
     base = {
         "machine_id": config.machine_id,
         "recording_path": str(path),
-        "recording_sha256": file_sha256(path),
+        "recording_sha256": sha256 or file_sha256(path),
         "settings": analysis_settings(config),
         "recorded_at_ns": None if recording is None else int(recording.time_ns[0]),
     }
@@ -213,12 +215,24 @@ def assess_history(config, history):
     Assessment
     """
     machine = config.machine_id
+    settings = settings_hash(analysis_settings(config))
     baseline_row = history.current_baseline(machine)
+    if baseline_row is not None and baseline_row.settings_hash != settings:
+        if not baseline_row.stale:
+            # Its runs were analysed otherwise: a change against it would mix the two.
+            baseline_row = replace(
+                baseline_row,
+                stale=True,
+                stale_reason="the analysis settings changed since the baseline was set: set a "
+                "new baseline, or replay its recordings ('imu-square replay')",
+                stale_at_ns=baseline_row.last_run_at_ns,
+            )
     design = stored_design(history, baseline_row, config.alarms)
     anchors = () if baseline_row is None else tuple(history.anchors(baseline_row.id))
     current = None if baseline_row is None else baseline_row.id
     earlier = {e.run_id: e for e in history.evaluations(machine) if e.baseline_id != current}
-    return assess(history.runs(machine), baseline_row, design, anchors, earlier)
+    runs = history.runs(machine, settings_hash=settings)
+    return assess(runs, baseline_row, design, anchors, earlier)
 
 
 def judge_recording(config, history, path, program=None, complete=True):

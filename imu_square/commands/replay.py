@@ -1,0 +1,273 @@
+"""``imu-square replay``: rebuild a machine's history from recorded runs, locally or on Dask."""
+
+import json
+import sys
+import time
+
+from imu_square.commands._monitor import add_config_argument
+from imu_square.errors import ImuSquareError
+
+
+def register(sub):
+    """Add the ``replay`` subcommand."""
+    p = sub.add_parser(
+        "replay",
+        help="replay recorded runs into a machine's history (local processes or Dask)",
+        description="Analyse recordings (files, folders searched recursively, globs, or fsspec "
+        "URLs) into the machine's history, in parallel, then judge the whole history again in "
+        "recording-time order and say when the alarms would have fired. A recording already "
+        "stored under the same analysis settings (same SHA-256) is skipped, so an interrupted "
+        "replay picks up where it stopped. A bad file never stops the batch: it is stored as "
+        "an invalid run with its reason, or counted as failed when it cannot be read. With "
+        "--settings and --into it rebuilds another history under other analysis settings, to "
+        "compare with 'imu-square history --compare'. Exit codes: 0 done (whatever the "
+        "verdicts); 2 a user's mistake.",
+    )
+    add_config_argument(p)
+    p.add_argument("paths", nargs="+", metavar="PATH", help="recordings, folders or globs")
+    p.add_argument("--jobs", type=int, help="local worker processes (default: one per core)")
+    p.add_argument(
+        "--settings", metavar="SETTINGS.toml", help="analysis settings ([analysis] table)"
+    )
+    p.add_argument("--into", metavar="HISTORY", help="another history (file or postgresql://)")
+    engine = p.add_mutually_exclusive_group()
+    engine.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="a running Dask scheduler")
+    engine.add_argument(
+        "--cluster", choices=("local",), help="a Dask LocalCluster of --jobs worker processes"
+    )
+    p.add_argument("--dry-run", action="store_true", help="list what would be done, do nothing")
+    p.add_argument("--json", action="store_true", help="a JSON log on stdout instead of the bar")
+    p.set_defaults(func=run)
+
+
+def _settings(path):
+    """The [analysis] table of a settings file."""
+    import tomllib
+
+    from imu_square.errors import MonitorConfigError
+    from imu_square.monitor.config import AnalysisSettings
+    from imu_square.monitor.fields import Table
+    from imu_square.textfile import read_text
+
+    text = read_text(path, MonitorConfigError)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MonitorConfigError(f"{path}: not valid TOML: {exc}") from None
+    extra = sorted(set(doc) - {"analysis"})
+    if extra:
+        raise MonitorConfigError(f"{path}: unknown section [{extra[0]}]; allowed: ['analysis']")
+    t = Table(doc.get("analysis", {}), "[analysis]", ("cutoff_hz", "order", "bootstrap"), path)
+    return AnalysisSettings(
+        cutoff_hz=t.number("cutoff_hz", 4.0, 0.0, 1000.0, lo_open=True),
+        order=t.integer("order", 1, 1, 8),
+        bootstrap=t.integer("bootstrap", 200, 0, 10_000),
+    )
+
+
+class _Progress:
+    """A one-line bar on a terminal (files, rate, ETA), a JSON line per file otherwise."""
+
+    def __init__(self, total, as_json):
+        self.total, self.done, self.start = total, 0, time.monotonic()
+        self.bar = not as_json and sys.stderr.isatty()
+        self.json = as_json or not sys.stderr.isatty()
+
+    def update(self, outcome):
+        self.done += 1
+        elapsed = time.monotonic() - self.start
+        rate = self.done / elapsed if elapsed > 0 else 0.0
+        eta = (self.total - self.done) / rate if rate > 0 else float("nan")
+        if self.bar:
+            width = 30
+            fill = round(width * self.done / self.total)
+            print(
+                f"\r[{'#' * fill}{'.' * (width - fill)}] {self.done}/{self.total} files, "
+                f"{rate:.1f}/s, ETA {eta:.0f} s ",
+                end="",
+                file=sys.stderr,
+                flush=True,
+            )
+        if self.json:
+            line = {
+                "event": "file",
+                "path": outcome.path,
+                "status": outcome.status,
+                "reason": outcome.reason,
+                "seconds": round(outcome.seconds, 4),
+                "done": self.done,
+                "total": self.total,
+                "rate_per_s": round(rate, 3),
+            }
+            print(json.dumps(line), flush=True)
+
+    def close(self):
+        if self.bar:
+            print(file=sys.stderr)
+
+
+def run(args):
+    """Replay the files, store them as they come, judge the history, summarise."""
+    from dataclasses import replace
+
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.replay import (
+        ReplayJob,
+        ReplaySummary,
+        expand_paths,
+        run_dask,
+        run_local,
+        store_outcome,
+    )
+    from imu_square.monitor.store import open_history
+    from imu_square.program import read_program
+
+    config = read_monitor(args.config)
+    if args.jobs is not None and args.jobs < 1:
+        raise ImuSquareError(f"--jobs must be a whole number >= 1, got {args.jobs}")
+    if args.settings:
+        config = replace(config, analysis=_settings(args.settings))
+    if args.into:
+        config = replace(config, history=args.into)
+    paths = expand_paths(args.paths)
+    program = read_program(config.program) if config.program else None
+    job = ReplayJob(config.machine_id, config.analysis, program)
+    if args.dry_run:
+        print(
+            f"would replay {len(paths)} recording(s) of machine {config.machine_id} into "
+            f"{config.history_location()} under analysis {config.analysis}, then judge it",
+            file=sys.stderr,
+        )
+        for p in paths:
+            print(p)
+        return 0
+    from imu_square.monitor.encoding import settings_hash
+    from imu_square.monitor.night import analysis_settings
+
+    summary = ReplaySummary(files=len(paths))
+    start = time.monotonic()
+    with open_history(config.history_location()) as history:
+        known = frozenset(
+            history.recording_hashes(config.machine_id, settings_hash(analysis_settings(config)))
+        )
+        if args.scheduler or args.cluster:
+            outcomes = run_dask(paths, job, known, scheduler=args.scheduler, workers=args.jobs or 2)
+        else:
+            outcomes = run_local(paths, job, known, jobs=args.jobs)
+        progress = _Progress(len(paths), args.json)
+        try:
+            for outcome in outcomes:
+                if outcome.row is not None:
+                    store_outcome(history, outcome)
+                summary.counts[outcome.status] += 1
+                if outcome.status == "invalid":
+                    summary.invalid.append((outcome.path, outcome.reason))
+                elif outcome.status == "failed":
+                    summary.failed.append((outcome.path, outcome.reason))
+                progress.update(outcome)
+        finally:
+            progress.close()
+        _rebaseline(read_monitor(args.config), config, history)
+        _judge_all(config, history, summary)
+    summary.seconds = time.monotonic() - start
+    _print_summary(summary, config)
+    if args.json:
+        print(json.dumps({"event": "summary", **summary.to_json_dict()}))
+    return 0
+
+
+def _rebaseline(original, config, history):
+    """Re-set the baseline from the same recordings when the replayed runs have none.
+
+    After a replay under other settings, or into another history, the machine's
+    baseline names runs analysed otherwise: the replayed runs get a baseline
+    of their own, from the same recordings analysed the new way.
+    """
+    from imu_square.monitor.encoding import settings_hash
+    from imu_square.monitor.night import analysis_settings
+    from imu_square.monitor.setup import set_baseline
+    from imu_square.monitor.store import open_history
+
+    machine = config.machine_id
+    settings = settings_hash(analysis_settings(config))
+    current = history.current_baseline(machine)
+    if current is not None and current.settings_hash == settings:
+        return
+    if current is not None:
+        source, hashes = current, {history.run(i).recording_sha256 for i in current.run_ids}
+    elif original.history_location() != config.history_location():
+        with open_history(original.history_location()) as old:
+            source = old.current_baseline(machine)
+            if source is None:
+                return
+            hashes = {old.run(i).recording_sha256 for i in source.run_ids}
+    else:
+        return
+    runs = [
+        r
+        for r in history.runs(machine, settings_hash=settings, valid_only=True)
+        if r.recording_sha256 in hashes
+    ]
+    try:
+        set_baseline(config, history, runs, note=f"replayed from baseline {source.id}")
+        print(f"baseline set again from {len(runs)} replayed runs", file=sys.stderr)
+    except ImuSquareError as exc:
+        print(f"no baseline for the replayed runs: {exc}", file=sys.stderr)
+
+
+def _finite(x):
+    return x if x == x else None  # NaN is None in the history
+
+
+def _judge_all(config, history, summary):
+    """Judge every run in recording-time order and store the verdicts."""
+    from imu_square.monitor.evaluate import iso
+    from imu_square.monitor.night import assess_history
+    from imu_square.monitor.rows import EvaluationRow
+
+    assessment = assess_history(config, history)
+    base = assessment.baseline_row
+    start = -1 if base is None else (base.first_run_at_ns or 0)
+    with history.transaction():
+        for night in assessment.nights:
+            r = night.run
+            recorded = r.recorded_at_ns
+            if (
+                base is not None
+                and r.id not in base.run_ids
+                and recorded is not None
+                and (recorded < start)
+            ):
+                continue  # judged against the baseline of its time, kept as it was
+            history.add_evaluation(
+                EvaluationRow(
+                    run_id=night.run.id,
+                    baseline_id=None if base is None else base.id,
+                    state=night.state,
+                    change_rad=_finite(night.change_rad),
+                    u_change_rad=_finite(night.u_change_rad),
+                    statistics={} if night.chart is None else night.chart.to_json_dict(),
+                )
+            )
+    summary.alarm_nights = [
+        iso(n.run.recorded_at_ns)
+        for n in assessment.nights
+        if n.chart is not None and n.chart.state == "alarm"
+    ]
+    summary.state = assessment.latest.state if assessment.latest else "no_baseline"
+
+
+def _print_summary(summary, config):
+    c = summary.counts
+    print(
+        f"replayed {summary.files} recording(s) of {config.machine_id} in {summary.seconds:.1f} s: "
+        f"{c['analysed']} analysed, {c['skipped']} skipped (already stored), {c['invalid']} "
+        f"invalid, {c['failed']} failed",
+        file=sys.stderr,
+    )
+    for path, reason in summary.invalid + summary.failed:
+        print(f"  {path}: {reason}", file=sys.stderr)
+    if summary.alarm_nights:
+        print(f"the alarms would have fired on: {', '.join(summary.alarm_nights)}", file=sys.stderr)
+    else:
+        print("the alarms would not have fired", file=sys.stderr)

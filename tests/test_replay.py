@@ -1,0 +1,214 @@
+"""``imu-square replay``: a folder of 100 recordings (3 of them corrupt) into fresh
+histories with one local process, two, and a Dask LocalCluster: the same rows and the
+same verdicts every way, an injected degradation's alarm night, idempotence,
+interruption, other analysis settings compared with ``history --compare``.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from datetime import timedelta
+from pathlib import Path
+
+import numpy as np
+import pytest
+from monitor_rig import ALPHA, SENSOR, START
+
+from imu_square.cli import main
+from imu_square.io.mcap import write_mcap
+from imu_square.monitor.replay import ReplayJob, expand_paths, run_dask
+from imu_square.monitor.store import open_history
+from imu_square.program import program_from_mapping
+from imu_square.simulate.geometry import Geometry
+from imu_square.simulate.machine import MachineModel
+from imu_square.simulate.run import simulate_run
+
+PROGRAM = program_from_mapping(
+    {"radius_mm": 25.0, "feed_mm_per_min": 9000.0, "cycles_per_direction": 4, "dwell_s": 0.3}
+)
+N_FILES, STEP_NIGHT, STEP = 100, 70, 15e-6
+MONITOR = """\
+[monitor]
+machine_id = "m1"
+history = "history.db"
+
+[program]
+file = "program.toml"
+
+[analysis]
+bootstrap = 0
+
+[alarms]
+monte_carlo_nights = 200000
+"""
+
+
+def _archive(folder):
+    """100 nights, the squareness 15 µm/m up from night 70; nights 13, 41, 88 corrupt."""
+    (folder / "program.toml").write_text(PROGRAM.to_toml())
+    (folder / "monitor.toml").write_text(MONITOR)
+    data = folder / "archive" / "2026"
+    data.mkdir(parents=True)
+    for day in range(N_FILES):
+        alpha = ALPHA + (STEP if day >= STEP_NIGHT else 0.0)
+        machine = MachineModel(geometry=Geometry(machine_squareness_rad=alpha))
+        when = START + timedelta(days=day)
+        path = data / f"m1-{day:03d}.mcap"
+        if day in (13, 41, 88):
+            path.write_bytes(b"\x89MCAP0\r\n" if day == 13 else b"junk" * (day + 1))
+            continue
+        rec, _ = simulate_run(
+            PROGRAM, machine, SENSOR, seed=day, t0_ns=int(when.timestamp() * 1e9), lead_in_s=0.5
+        )
+        write_mcap(rec, path)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory):
+    return _archive(tmp_path_factory.mktemp("replay"))
+
+
+def _replay(archive, *extra):
+    code = main(["replay", "--config", str(archive / "monitor.toml"), *extra])
+    assert code == 0
+
+
+def _rows(location):
+    """Every run and its verdict, as comparable values (ids and analysis times aside)."""
+    with open_history(location) as h:
+        states = {e.run_id: (e.state, e.change_rad, e.u_change_rad, e.statistics)
+                  for e in h.evaluations("m1")}  # fmt: skip
+        out = {}
+        for r in h.runs("m1"):
+            row = {k: v for k, v in vars(r).items() if k not in ("id", "analysed_at_ns")}
+            out[r.recording_sha256] = (json.dumps(row, sort_keys=True), states.get(r.id))
+        return out
+
+
+@pytest.mark.slow
+def test_the_same_history_whatever_the_engine_and_the_alarm_night(archive, capsys):
+    folder = str(archive / "archive")
+    # the machine's own history: replay, set the baseline from its first 5 nights, judge
+    _replay(archive, folder, "--jobs", "2")
+    out = capsys.readouterr()
+    assert "97 analysed, 0 skipped (already stored), 3 invalid, 0 failed" in out.err
+    with open_history(archive / "history.db") as h:
+        first = [r.id for r in h.runs("m1", valid_only=True)][:5]
+    assert main(["baseline", "set", "--config", str(archive / "monitor.toml"),
+                 *map(str, first)]) == 0  # fmt: skip
+    capsys.readouterr()
+    _replay(archive, folder, "--jobs", "2", "--json")  # everything is stored: judge only
+    out = capsys.readouterr()
+    summary = json.loads(out.out.splitlines()[-1])
+    assert summary["counts"] == {"analysed": 0, "invalid": 0, "skipped": 100, "failed": 0}
+    fired = summary["alarm_nights"]
+    assert fired, "a 15 µm/m step (6 sigma) must be found"
+    first_alarm = (START + timedelta(days=STEP_NIGHT)).strftime("%Y-%m-%d")
+    last_alarm = (START + timedelta(days=STEP_NIGHT + 3)).strftime("%Y-%m-%d")
+    assert first_alarm <= fired[0][:10] <= last_alarm, fired
+    assert all(night[:10] >= first_alarm for night in fired), "no false alarm before the step"
+    # fresh histories of the first 40 nights with one process, two, and Dask: identical
+    # rows and verdicts
+    first40 = str(archive / "archive" / "2026" / "m1-0[0-3]?.mcap")
+    histories = []
+    for engine in (["--jobs", "1"], ["--jobs", "2"], ["--cluster", "local", "--jobs", "2"]):
+        into = archive / f"history-{'-'.join(engine).replace('--', '')}.db"
+        _replay(archive, first40, "--into", str(into), *engine)
+        capsys.readouterr()
+        histories.append(_rows(into))
+    assert len(histories[0]) == 40
+    assert histories[0] == histories[1] == histories[2]
+    # and the rows of the machine's own history for those nights, replayed in one go
+    reference = _rows(archive / "history.db")
+    assert all(reference[k][0] == row for k, (row, _) in histories[0].items())
+
+
+@pytest.mark.slow
+def test_other_settings_into_another_history_and_compare(archive, capsys):
+    other = archive / "other.toml"
+    other.write_text("[analysis]\ncutoff_hz = 2.0\norder = 2\nbootstrap = 0\n")
+    plain, into = archive / "plain.db", archive / "cutoff2.db"
+    _replay(archive, str(archive / "archive"), "--into", str(plain))
+    _replay(archive, str(archive / "archive"), "--settings", str(other), "--into", str(into))
+    capsys.readouterr()
+    assert main(["history", "--config", str(archive / "monitor.toml"), "--json",
+                 "--compare", str(plain), str(into)]) == 0  # fmt: skip
+    out = capsys.readouterr()
+    pairs = [json.loads(line) for line in out.out.splitlines()]
+    assert len(pairs) == N_FILES
+    both = [p for p in pairs if p["a_valid"] and p["b_valid"]]
+    assert len(both) == 97
+    # the same samples through another filter share most of their noise: the two results
+    # scatter about each other by less than one night's u, and agree on average to one u
+    diff = np.array([p["b_squareness_urad"] - p["a_squareness_urad"] for p in both])
+    u = float(np.median([p["a_u_squareness_urad"] for p in both]))
+    assert np.std(diff, ddof=1) < u and abs(np.mean(diff)) < u
+    assert "100 recordings in both, 0 only in A, 0 only in B" in out.err
+
+
+@pytest.mark.slow
+def test_dry_run_lists_and_bad_paths_are_one_line(archive, capsys):
+    _replay(archive, str(archive / "archive" / "2026" / "m1-00*.mcap"), "--dry-run")
+    out = capsys.readouterr()
+    assert len(out.out.splitlines()) == 10 and "would replay 10 recording(s)" in out.err
+    assert main(["replay", "--config", str(archive / "monitor.toml"), "nowhere/"]) == 2
+    assert "nowhere/: no recording there" in capsys.readouterr().err
+    assert main(["replay", "--config", str(archive / "monitor.toml"), "--jobs", "0",
+                 str(archive / "archive")]) == 2  # fmt: skip
+    assert "--jobs must be a whole number >= 1, got 0" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_an_interrupted_replay_picks_up_and_loses_nothing(archive, tmp_path):
+    into = tmp_path / "interrupted.db"
+    script = Path(sys.executable).with_name("imu-square")
+    argv = [str(script), "replay", "--config", str(archive / "monitor.toml"),
+            str(archive / "archive"), "--into", str(into), "--jobs", "2", "--json"]  # fmt: skip
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    done = 0
+    for line in proc.stdout:  # wait until some files are in, then interrupt
+        done += json.loads(line).get("event") == "file"
+        if done >= 20:
+            proc.send_signal(signal.SIGINT)
+            break
+    proc.wait(timeout=120)
+    with open_history(into) as h:
+        stored = len(h.runs("m1"))
+    assert 20 <= stored < N_FILES - 3
+    subprocess.run(argv, check=True, capture_output=True, timeout=600)
+    with open_history(into) as h:
+        runs = h.runs("m1")
+    assert len(runs) == N_FILES  # the 3 corrupt files are stored as invalid runs
+    assert len({r.recording_sha256 for r in runs}) == len(runs)
+
+
+@pytest.mark.slow
+def test_a_dask_worker_killed_mid_replay_loses_and_doubles_no_file(archive):
+    from distributed import Client, LocalCluster
+
+    paths = expand_paths([str(archive / "archive")])[:30]
+    job = ReplayJob("m1")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster:  # fmt: skip
+        with Client(cluster) as client:
+            pids = list(client.run(os.getpid).values())
+        outcomes = []
+        killer = threading.Timer(0.0, lambda: None)
+
+        def kill_one():
+            os.kill(pids[0], signal.SIGKILL)
+
+        for outcome in run_dask(paths, job, scheduler=cluster.scheduler_address):
+            outcomes.append(outcome)
+            if len(outcomes) == 5:
+                killer = threading.Timer(0.1, kill_one)
+                killer.start()
+        killer.join()
+        time.sleep(0.1)
+    assert sorted(o.path for o in outcomes) == sorted(paths)
+    assert {o.status for o in outcomes} <= {"analysed", "invalid", "failed"}
