@@ -163,7 +163,7 @@ class EmulatedBoard:
         self.header = check_header(
             DeviceHeader(
                 model=_name(sensor.model, "emulated"),
-                serial=f"EMU{seed}"[:32],
+                serial=_name(sensor.serial, "emulated")[:32],  # the simulated sensor's identity
                 firmware=f"imu-square-emulator-{__version__}"[:32],
                 sample_rate_hz=recording.sample_rate_hz,
                 dt_ns=recording.dt_ns,

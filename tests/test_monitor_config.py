@@ -51,6 +51,8 @@ def test_relative_paths_are_taken_from_the_file(tmp_path):
         (MINIMAL + "[analysis]\ncutoff = 4\n", r"\[analysis\] has unknown field 'cutoff'"),
         (MINIMAL + "[monitor]\n", r"not valid TOML"),
         ('[monitor]\nmachine_id = "a/b"\n', r"machine_id must be 1-64 letters"),
+        ('[monitor]\nmachine_id = ".."\n', r"starting with a letter or digit, got '\.\.'"),
+        (MINIMAL + 'history = "mysql://db/x"\n', r"history must be a file path or a postgresql://"),
     ],
 )
 def test_mistakes_are_one_line_naming_file_field_and_value(tmp_path, text, message):

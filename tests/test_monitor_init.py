@@ -51,7 +51,8 @@ def test_init_refuses_to_overwrite_and_bad_input(tmp_path, capsys):
     assert main(["init", "--machine-id", "m 1", "-o", str(tmp_path / "x.toml")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.endswith(
-        "[monitor] machine_id must be 1-64 letters, digits, '_', '.' or '-', got 'm 1'"
+        "[monitor] machine_id must be 1-64 letters, digits, '_', '.' or '-', starting with a "
+        "letter or digit, got 'm 1'"
     )
     assert not (tmp_path / "x.toml").exists() and not list(tmp_path.glob(".x.toml*"))
     assert main(["init", "--machine-id", "m", "-o", str(tmp_path / "y.toml"), "--at", "25:00"]) == 2

@@ -171,3 +171,92 @@ def test_a_night_through_the_emulated_board_ends_in_a_verdict(rig, capsys):
         assert (rig / "data" / name).stat().st_size > 10_000
     assert main(["nightly", "--config", str(rig / "monitor.toml"), "--check"]) == 0
     assert "ok" in capsys.readouterr().err
+
+
+# ---- found by an adversarial review of the monitor, each kept as a regression test ----
+
+
+@pytest.mark.slow
+def test_a_night_inside_the_baselines_dates_is_judged_not_waved_through(rig, capsys):
+    # the baseline's runs are nights 0-4; a night recorded between two of them is charted
+    path = night(rig, 2, alpha=ALPHA + 50e-6, seed=77)
+    _, record = judge(rig / "monitor.toml", path, capsys)
+    assert record["state"] == "alarm" and record["change_urad"] > 40
+
+
+@pytest.mark.slow
+def test_a_machine_change_that_follows_the_season_is_not_taken_for_drift(rig, capsys):
+    # a temperature channel but no sensor drift; the ambient rises 0.4 °C a night while the
+    # machine creeps 3 µm/m a night: no within-night slope, so nothing is "corrected" away
+    config = rig / "monitor.toml"
+    states = []
+    for k, day in enumerate(range(5, 13)):
+        sensor = replace(SENSOR, temperature_c=22.0 + 0.4 * k)
+        _, record = judge(
+            config, night(rig, day, alpha=ALPHA + 3e-6 * (k + 1), sensor=sensor), capsys
+        )
+        states.append(record["state"])
+        assert not record["drift_corrected"]
+    assert "alarm" in states
+
+
+@pytest.mark.slow
+def test_a_replaced_sensor_makes_the_baseline_stale(rig, capsys):
+    other = replace(SENSOR, model="spare", beta_rad=SENSOR.beta_rad + 200e-6)
+    code, record = judge(rig / "monitor.toml", night(rig, 5, sensor=other), capsys)
+    assert record["state"] == "stale_baseline" and code == 13
+    assert "the sensor was replaced" in record["verdict"]
+    # and a small remount (0.1 deg) is seen: the tolerance is the nights' eps_c scatter
+    turned = replace(SENSOR, eps_c_rad=SENSOR.eps_c_rad + math.radians(0.1))
+    rig2 = rig / "second"
+    rig2.mkdir()
+    code, record = judge(rig / "monitor.toml", night(rig2, 6, sensor=turned), capsys)
+    assert record["state"] == "stale_baseline"
+
+
+@pytest.mark.slow
+def test_bad_inputs_found_by_review_are_one_line_and_store_nothing(rig, capsys):
+    config = rig / "monitor.toml"
+    with open_history(rig / "history.db") as h:
+        before = len(h.runs("m1"))
+    # a baseline that is refused stores none of its new recordings
+    junk = rig / "junk.mcap"
+    junk.write_bytes(b"junk")
+    good = [str(night(rig, d)) for d in (20, 21)]
+    assert main(["baseline", "set", "--config", str(config), str(junk), *good]) == 2
+    assert "invalid" in capsys.readouterr().err
+    with open_history(rig / "history.db") as h:
+        assert len(h.runs("m1")) == before
+    # NaN samples are named as such
+    rec_path = night(rig, 22)
+    from imu_square.io.mcap import read_mcap
+
+    rec = read_mcap(rec_path)
+    rec.accel[100:105, 0] = float("nan")
+    write_mcap(rec, rig / "nan.mcap")
+    _, record = judge(config, rig / "nan.mcap", capsys)
+    assert record["state"] == "invalid" and "not numbers (NaN or infinite)" in record["reason"]
+    # a recording older than the baseline is kept, not judged against it, and no crash
+    code, record = judge(config, night(rig, -3), capsys)
+    assert code == EXIT_CODES["no_baseline"] and record["state"] == "no_baseline"
+    # a data folder that cannot be made: one line before anything is stored
+    (rig / "blocker").write_text("a file")
+    text = (rig / "monitor.toml").read_text().replace('data_dir = "data"', 'data_dir = "blocker/x"')
+    (rig / "bad.toml").write_text(text)
+    with open_history(rig / "history.db") as h:
+        before = len(h.runs("m1"))
+    assert main(["nightly", "--config", str(rig / "bad.toml"), "--recording", good[0]]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot create the data folder" in err[0]
+    with open_history(rig / "history.db") as h:
+        assert len(h.runs("m1")) == before
+    # a relative --recording is stored with its absolute path
+    import os
+
+    cwd = os.getcwd()
+    os.chdir(rig)
+    try:
+        _, record = judge("monitor.toml", Path(good[1]).name, capsys)
+    finally:
+        os.chdir(cwd)
+    assert record["recording"] == str(Path(good[1]).resolve())

@@ -238,21 +238,24 @@ def run_monitor(args, config=None):
     config = config or read_monitor(args.config)
     program = read_program(config.program or data_path("program_paper.toml"))
     out = Path(args.out) if args.out else config.output_dir()
+    _check_night(config, out, not args.recording)  # before the machine runs or anything is stored
+    if args.recording and not Path(args.recording).is_file():
+        raise ImuSquareError(f"{args.recording}: no such recording")
     with open_history(config.history_location()) as history:
         if args.check:
             print(
                 f"{config.path}: machine {config.machine_id}, history {history.location} "
                 f"({len(history.runs(config.machine_id))} runs), program "
-                f"{config.program or 'the paper test'}, sensor {config.sensor.port}: ok",
+                f"{config.program or 'the paper test'}, sensor {config.sensor.port}, outputs "
+                f"in {out}: ok",
                 file=sys.stderr,
             )
             return 0
         complete = True
         code = 0
         if args.recording:
-            path = Path(args.recording)
+            path = Path(args.recording).resolve()
         else:
-            out.mkdir(parents=True, exist_ok=True)
             stem = out / f"{config.machine_id}-{time.strftime('%Y%m%d-%H%M%S')}"
             emu = config.emulated
             path, status, code, _ = _record(
@@ -285,6 +288,37 @@ def run_monitor(args, config=None):
         print(json.dumps(outcome.record))
     # a failed write outranks the verdict: the night must be looked at
     return code if code == 4 else EXIT_CODES[outcome.state]
+
+
+def _check_night(config, out, recording):
+    """Everything the night will need, checked before it starts: one line if not."""
+    from imu_square.errors import ConfigError
+    from imu_square.monitor.outputs import ensure_folder
+    from imu_square.simulate import read_machine, read_sensor
+
+    ensure_folder(out, "data")
+    ensure_folder(config.outbox_dir(), "alert outbox")
+    if config.metrics is not None and config.metrics.textfile is not None:
+        ensure_folder(Path(config.metrics.textfile).parent, "metrics")
+    for sink in config.alerts.sinks:
+        path = getattr(sink, "path", None)
+        if path is not None:
+            ensure_folder(Path(path).parent, f"{sink.name} alert")
+    if config.sensor.emulated:
+        for field, path, read in (
+            ("machine", config.emulated.machine, read_machine),
+            ("sensor", config.emulated.sensor, read_sensor),
+        ):
+            if path is not None:
+                try:
+                    read(path)
+                except ConfigError as exc:
+                    raise ConfigError(f"{config.path}: [emulated] {field}: {exc}") from None
+    elif recording and "://" not in config.sensor.port and not Path(config.sensor.port).exists():
+        raise ConfigError(
+            f"{config.path}: [sensor] port {config.sensor.port!r} does not exist (is the board "
+            f"plugged in? a stable name is under /dev/serial/by-id/)"
+        )
 
 
 def run_demo(args):

@@ -2,6 +2,7 @@
 
 import json
 import sys
+from dataclasses import replace
 from datetime import UTC, datetime
 
 from imu_square.commands._monitor import add_config_argument, monitor_session
@@ -47,23 +48,29 @@ def run(args):
     """Print the table (or JSON), draw the chart, back the history up, or compare two."""
     if args.compare:
         return _compare(args)
+    import math
+
+    from imu_square.monitor.encoding import ns_from_datetime
     from imu_square.monitor.evaluate import iso, verdict
     from imu_square.monitor.night import assess_history, night_record
+    from imu_square.units import URAD
 
     since = _since(args.since)
+    if args.plot:
+        from imu_square.io.output import check_output_path
+
+        check_output_path(args.plot, overwrite=True)
     with monitor_session(args.config) as (config, history):
         if args.backup:
             path = history.backup(args.backup)
             print(f"backed up {history.location} to {path}", file=sys.stderr)
             return 0
         assessment = assess_history(config, history)
+        start = None if since is None else ns_from_datetime(since)
         nights = [
             n
             for n in assessment.nights
-            if since is None
-            or (
-                n.run.recorded_at_ns is not None and n.run.recorded_at_ns >= since.timestamp() * 1e9
-            )
+            if start is None or (n.run.recorded_at_ns is not None and n.run.recorded_at_ns >= start)
         ]
         print(
             f"{'run':>5}  {'recorded':20}  {'state':14}  {'change µm/m':>16}  {'θy−θx µm/m':>11}  "
@@ -72,13 +79,11 @@ def run(args):
         )
         for n in nights:
             r = n.run
-            change = (
-                ""
-                if n.change_rad != n.change_rad
-                else f"{n.change_rad * 1e6:+7.1f} ± {n.u_change_rad * 1e6:5.1f}"
-            )
-            sq = "" if r.squareness_rad is None else f"{r.squareness_rad * 1e6:+11.1f}"
-            eps = "" if r.eps_c_rad is None else f"{r.eps_c_rad * 57.29577951308232:8.3f}"
+            change = ""
+            if math.isfinite(n.change_rad):
+                change = f"{n.change_rad / URAD:+7.1f} ± {n.u_change_rad / URAD:5.1f}"
+            sq = "" if r.squareness_rad is None else f"{r.squareness_rad / URAD:+11.1f}"
+            eps = "" if r.eps_c_rad is None else f"{math.degrees(r.eps_c_rad):8.3f}"
             print(
                 f"{r.id:>5}  {iso(r.recorded_at_ns):20}  {n.state:14}  {change:>16}  {sq:>11}  "
                 f"{eps:>8}  {n.reason}",
@@ -89,7 +94,8 @@ def run(args):
         if args.plot:
             from imu_square.monitor.plots import plot_trend
 
-            plot_trend(assessment, args.plot)
+            shown = assessment if start is None else replace(assessment, nights=tuple(nights))
+            plot_trend(shown, args.plot)
             print(f"wrote {args.plot}", file=sys.stderr)
     return 0
 

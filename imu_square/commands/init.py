@@ -42,6 +42,10 @@ def run(args):
     out = Path(args.output).expanduser().absolute()
     if out.exists() and not args.force:
         raise ImuSquareError(f"{out}: exists already; give --force to overwrite it")
+    if args.systemd:  # checked first: a failure must not leave a monitor file behind
+        from imu_square.monitor.outputs import ensure_folder
+
+        ensure_folder(Path(args.systemd).expanduser(), "systemd units")
     text = monitor_file_text(args.machine_id, port=args.port, history=args.history)
     tmp = out.with_name(f".{out.name}.tmp")
     try:
@@ -80,5 +84,6 @@ def run(args):
     else:
         for name, body in units.items():
             print(f"# --- {name}\n{body}")
-    print(f"# --- or, in crontab -e:\n{cron_line(executable, out, at=args.at)}")
+    log = out.with_name(f"{args.machine_id}.log")
+    print(f"# --- or, in crontab -e:\n{cron_line(executable, out, at=args.at, log_file=log)}")
     return 0

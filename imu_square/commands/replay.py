@@ -239,10 +239,11 @@ def _judge_all(config, history, summary):
                 and (recorded < start)
             ):
                 continue  # judged against the baseline of its time, kept as it was
+            judged = base is not None and night.state != "no_baseline"
             history.add_evaluation(
                 EvaluationRow(
                     run_id=night.run.id,
-                    baseline_id=None if base is None else base.id,
+                    baseline_id=base.id if judged else None,
                     state=night.state,
                     change_rad=_finite(night.change_rad),
                     u_change_rad=_finite(night.u_change_rad),

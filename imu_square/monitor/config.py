@@ -250,9 +250,19 @@ def monitor_from_mapping(doc, path):
 
     mon = table("monitor", ("machine_id", "history", "data_dir"))
     machine_id = mon.text("machine_id")
-    if not set(machine_id) <= _MACHINE_ID_CHARS or len(machine_id) > 64:
-        mon.fail("machine_id", "1-64 letters, digits, '_', '.' or '-'", machine_id)
+    if (
+        not set(machine_id) <= _MACHINE_ID_CHARS
+        or len(machine_id) > 64
+        or not machine_id[0].isalnum()
+    ):
+        mon.fail(
+            "machine_id",
+            "1-64 letters, digits, '_', '.' or '-', starting with a letter or digit",
+            machine_id,
+        )
     history = mon.text("history", "", empty=True)
+    if "://" in history and not history.startswith(("postgresql://", "postgres://")):
+        mon.fail("history", "a file path or a postgresql:// URL", history)
     if history and not history.startswith(("postgresql://", "postgres://")):
         history = str(mon.path("history"))
     data_dir = mon.path("data_dir") if mon.text("data_dir", "", empty=True) else None

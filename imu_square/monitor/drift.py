@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from imu_square.errors import AnalysisError
+from imu_square.units import URAD
 
 REGRESSORS = ("temperature_c", "time_since_power_on_s")
 # A slope is "significant" below this p-value (two-sided t-test).
@@ -118,9 +119,9 @@ class DriftFit:
             "uncorrected_rad",
             "u_uncorrected_rad",
         ):
-            d[k.replace("_rad", "_urad")] = d.pop(k) * 1e6
-        d["slope_urad_per_unit"] = d.pop("slope_rad_per_unit") * 1e6
-        d["u_slope_urad_per_unit"] = d.pop("u_slope_rad_per_unit") * 1e6
+            d[k.replace("_rad", "_urad")] = d.pop(k) / URAD
+        d["slope_urad_per_unit"] = d.pop("slope_rad_per_unit") / URAD
+        d["u_slope_urad_per_unit"] = d.pop("u_slope_rad_per_unit") / URAD
         d["significant"] = self.significant
         return d
 

@@ -16,17 +16,21 @@ The charts always run over every valid night since the baseline, in
 recording-time order: the verdicts are a function of the history, so a
 replay rebuilds them exactly, whatever order the runs were stored in.
 
-**Thermal drift across nights.** Each night's ``theta_y - theta_x`` is
-regressed, with the baseline's runs and every valid night before it (never a
-later one), on the sensor's mean temperature during the run, or without a
-temperature channel on its time since power-on, capped at :data:`UPTIME_CAP_S`
-(:func:`~.drift.fit_run_drift`).
-When that slope is significant (p < :data:`DRIFT_P`, at least
-:data:`DRIFT_MIN_RUNS` runs) the night is corrected to the baseline's mean
-temperature (or uptime) before its change is taken, and the slope's
-uncertainty enters the change's. A machine change that is independent of the
-temperature adds scatter but no slope; one that follows it is partly taken for
-drift, which is why the correction needs significance and is reported.
+**Thermal drift.** The machine does not change within a night, so a trend of
+the per-cycle values within one (:func:`~.drift.fit_night_drift`, stored with
+each run) is the sensor's. With a temperature channel, the within-night slopes
+of every valid night up to the one judged (never a later one) are pooled,
+inverse-variance weighted; when the pooled slope passes :data:`DRIFT_SIGNIFICANCE`
+standard errors the night is corrected to the baseline runs' mean temperature
+before its change is taken, and the slope's uncertainty enters the change's.
+A night whose sensor warmed by more than :data:`WARMING_RISE_C` during the run
+is not judged while that slope is not known. A regression *across* nights on
+the temperature (:func:`~.drift.fit_run_drift`)
+is reported but never used to correct: it cannot tell the sensor's drift from
+a machine change that follows the season. Without a temperature channel a
+linear slope against the time since power-on cannot be carried from a cold
+night to a warm baseline: a night whose own within-night drift against it is
+significant (p < :data:`WARMING_P`) is not judged but said to be warming up.
 """
 
 import math
@@ -39,13 +43,15 @@ from imu_square.monitor.encoding import datetime_from_ns
 from imu_square.units import URAD
 
 STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
-# The across-night drift correction needs this many runs and a slope this significant.
-DRIFT_MIN_RUNS = 8
-DRIFT_P = 0.01
-# A sensor warms up in minutes to an hour; beyond this its uptime says nothing more, and
-# an uptime that grows night after night (a board never switched off) must not stand in
-# for the calendar, or a slow change of the machine would be taken for drift. [s]
-UPTIME_CAP_S = 6 * 3600.0
+# The pooled within-night temperature slope corrects the nights past this many standard
+# errors (a false correction one night in 370).
+DRIFT_SIGNIFICANCE = 3.0
+# Without a temperature channel, a night drifting this significantly is still warming up.
+WARMING_P = 0.001
+# A sensor whose temperature rises this much during the run is still warming up: the night
+# is not judged while no drift slope is known (a seasonal change of the ambient leaves
+# the run's own temperature steady, and is judged). [degC]
+WARMING_RISE_C = 0.5
 
 
 def iso(ns):
@@ -98,10 +104,12 @@ class Night:
         What the alarm charts saw (valid nights since the baseline).
     reason : str
         Why the state, in one line (the invalid run's reason, the remount, ...).
-    drift : DriftFit or None
-        The across-night drift regression up to this night, when one could be fitted.
+    drift : dict or None
+        The drift correction applied to the night: the pooled within-night
+        ``slope_rad_per_c`` and its ``u``, the night's and the reference
+        temperature, and the ``correction_rad`` added to its ``theta_y - theta_x``.
     drift_corrected : bool
-        Whether the change was corrected for it.
+        Whether the change was corrected.
     """
 
     run: object
@@ -130,6 +138,9 @@ class Assessment:
         Every run of the machine, in recording-time order.
     anchors : tuple of AnchorRow
         The baseline's anchors by reference methods.
+    run_drift : DriftFit or None
+        The across-night regression of the valid runs since (and of) the baseline on
+        their temperature or uptime: reported, never used to correct.
     """
 
     machine_id: str
@@ -137,6 +148,7 @@ class Assessment:
     design: object
     nights: tuple
     anchors: tuple = field(default=())
+    run_drift: object = None
 
     @property
     def latest(self):
@@ -190,16 +202,18 @@ def design_for(baseline_row, runs, settings):
 def assess(runs, baseline_row, design, anchors=(), earlier=None):
     """Judge every run of a machine against its current baseline.
 
-    Runs recorded before the current baseline's first run keep the verdict
-    they had against the baseline of their time (``earlier``). Since the
-    baseline, an alarm stands until a new baseline is set: the charts restart
-    after it (the zero state their run lengths assume), but the machine is not
+    The baseline's own runs are its nights; runs recorded before its first run
+    keep the verdict they had against the baseline of their time
+    (``earlier``); every other valid run is charted, in recording-time order.
+    An alarm stands until a new baseline is set: the charts restart after it
+    (the zero state their run lengths assume), but the machine is not
     "unchanged" again until someone has looked at it and set a new baseline.
 
     Parameters
     ----------
     runs : sequence of RunRow
-        All the machine's runs, in recording-time order.
+        All the machine's runs under the baseline's analysis settings, in
+        recording-time order.
     baseline_row : BaselineRow or None
         The current baseline (stale or not).
     design : AlarmDesign or None
@@ -214,6 +228,7 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
     Assessment
     """
     from imu_square.monitor.alarms import evaluate
+    from imu_square.monitor.baseline import remount_tolerance
 
     machine_id = runs[0].machine_id if runs else ""
     earlier = earlier or {}
@@ -224,44 +239,55 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
         return Assessment(machine_id, None, None, tuple(nights[r.id] for r in runs), ())
     baseline = baseline_of(baseline_row)
     in_baseline = set(baseline_row.run_ids)
+    base_runs = [r for r in runs if r.id in in_baseline]
     before = baseline_row.first_run_at_ns or 0
-    after = baseline_row.last_run_at_ns or 0
-    drift_fits = _drift_fits(runs, in_baseline, after)
+    tolerance = remount_tolerance([r.eps_c_rad for r in base_runs] or [baseline_row.eps_c_rad])
+    serials = {_serial(r) for r in base_runs} - {""}
+    corrections = _drift_corrections(runs, base_runs)
     charted, changes = [], []
     stale_since = baseline_row.stale_at_ns if baseline_row.stale else None
+    stale_reason = baseline_row.stale_reason
     for r in runs:
+        recorded = r.recorded_at_ns
         if not r.valid:
             nights[r.id] = _invalid(r)
             continue
-        if r.id not in in_baseline and (r.recorded_at_ns or 0) < before:
+        if r.id not in in_baseline and recorded is not None and recorded < before:
             nights[r.id] = _earlier(r, earlier.get(r.id))
             continue
         value = run_value(r)
-        fit, corrected = drift_fits.get(r.id, (None, False))
-        if corrected:
-            x = _drift_x(r, fit.regressor)
+        drift = corrections.get(r.id)
+        if drift is not None and drift.get("warming") and r.id not in in_baseline:
+            nights[r.id] = Night(r, "invalid", reason=drift["warming"], drift=drift)
+            continue
+        if drift is not None and drift["applied"]:
             value = replace(
                 value,
-                squareness_rad=float(fit.corrected(value.squareness_rad, x)),
-                u_squareness_rad=math.hypot(
-                    value.u_squareness_rad, (x - fit.reference) * fit.u_slope_rad_per_unit
-                ),
+                squareness_rad=value.squareness_rad + drift["correction_rad"],
+                u_squareness_rad=math.hypot(value.u_squareness_rad, drift["u_correction_rad"]),
             )
-        change = change_since(baseline, value)
-        if r.id in in_baseline or (r.recorded_at_ns or 0) <= after:
+        change = change_since(baseline, value, tolerance)
+        corrected = bool(drift and drift["applied"])
+        if r.id in in_baseline:
             nights[r.id] = Night(
-                r, "ok", change.change_rad, change.u_change_rad, None, "baseline", fit, corrected
+                r, "ok", change.change_rad, change.u_change_rad, None, "baseline", drift, corrected
             )
             continue
-        if change.remounted and stale_since is None:
-            stale_since = r.recorded_at_ns or 0
-        if stale_since is not None and (r.recorded_at_ns or 0) >= stale_since:
-            reason = baseline_row.stale_reason or _remount_reason(change)
+        swapped = _serial(r) and serials and _serial(r) not in serials
+        if (change.remounted or swapped) and stale_since is None:
+            stale_since = recorded if recorded is not None else 0
+            stale_reason = (
+                f"the sensor was replaced (serial {_serial(r)}, the baseline's "
+                f"{', '.join(sorted(serials))}): set a new baseline"
+                if swapped
+                else _remount_reason(change)
+            )
+        if stale_since is not None and (recorded is None or recorded >= stale_since):
             nights[r.id] = Night(
-                r, "stale_baseline", change.change_rad, change.u_change_rad, None, reason
+                r, "stale_baseline", change.change_rad, change.u_change_rad, None, stale_reason
             )
             continue
-        charted.append((r, value, fit, corrected))
+        charted.append((r, value, drift, corrected))
         changes.append(change)
     if charted:
         c = abs(baseline.cos_2eps_c)
@@ -272,7 +298,7 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
             [float(r.dof) if r.dof else None for r, _, _, _ in charted],
         )
         alarm_since = None
-        for (r, _, fit, corrected), ch, point in zip(
+        for (r, _, drift, corrected), ch, point in zip(
             charted, changes, evaluation.points, strict=True
         ):
             notes = ["corrected for the sensor's thermal drift"] if corrected else []
@@ -283,65 +309,101 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
             elif state == "alarm":
                 alarm_since = r.recorded_at_ns
             nights[r.id] = Night(
-                r, state, ch.change_rad, ch.u_change_rad, point, "; ".join(notes), fit, corrected
+                r, state, ch.change_rad, ch.u_change_rad, point, "; ".join(notes), drift, corrected
             )
     return Assessment(
-        machine_id, baseline_row, design, tuple(nights[r.id] for r in runs), tuple(anchors)
+        machine_id,
+        baseline_row,
+        design,
+        tuple(nights[r.id] for r in runs),
+        tuple(anchors),
+        _run_drift(runs, in_baseline, before),
     )
 
 
-def _drift_x(row, regressor):
-    """A run's drift variable: its mean temperature, or its uptime at its middle, capped
-    at :data:`UPTIME_CAP_S`. [degC or s]"""
-    if regressor == "temperature_c":
-        return row.temperature_mean_c
-    result = row.result or {}
-    ends = [result.get("per_cycle", {}).get(k) or [] for k in ("t_ccw_s", "t_cw_s")]
-    middle = float(np.mean(ends[0] + ends[1])) if ends[0] or ends[1] else 0.0
-    return min(row.time_since_power_on_s + middle, UPTIME_CAP_S)
+def _serial(row):
+    """The sensor's serial number a run was recorded with, '' when unknown."""
+    return str(((row.result or {}).get("sensor") or {}).get("serial", "") or "")
 
 
-def _drift_fits(runs, in_baseline, after_ns):
-    """For each valid run, the across-night drift fit on it and the runs before, and
-    whether it corrects the run: ``{run_id: (DriftFit, bool)}``."""
+def _within(row):
+    """A run's within-night drift fit as stored (``per_cycle["drift"]``), or None."""
+    return (row.per_cycle or {}).get("drift")
+
+
+def _drift_corrections(runs, base_runs):
+    """Per valid run id, the drift correction or warm-up flag (module docstring)."""
+    valid = [r for r in runs if r.valid]
+    out = {}
+    if base_runs and all(r.temperature_mean_c is not None for r in valid):
+        reference = float(np.mean([r.temperature_mean_c for r in base_runs]))
+        weight = weighted = 0.0
+        for r in valid:  # recording-time order: each night sees only itself and earlier ones
+            fit = _within(r)
+            if fit and fit.get("regressor") == "temperature_c" and fit["u_slope_urad_per_unit"]:
+                w = fit["u_slope_urad_per_unit"] ** -2
+                weight += w
+                weighted += w * fit["slope_urad_per_unit"]
+            if weight == 0.0:
+                continue
+            slope, u_slope = weighted / weight * URAD, weight**-0.5 * URAD
+            offset = reference - r.temperature_mean_c
+            applied = abs(slope) > DRIFT_SIGNIFICANCE * u_slope
+            out[r.id] = {
+                "regressor": "temperature_c",
+                "slope_rad_per_c": slope,
+                "u_slope_rad_per_c": u_slope,
+                "temperature_c": r.temperature_mean_c,
+                "reference_c": reference,
+                "correction_rad": slope * offset,
+                "u_correction_rad": abs(offset) * u_slope,
+                "applied": applied,
+            }
+        for r in valid:
+            rise = (r.temperature_end_c or 0.0) - (r.temperature_start_c or 0.0)
+            if rise > WARMING_RISE_C and not out.get(r.id, {}).get("applied"):
+                out.setdefault(r.id, {"regressor": "temperature_c", "applied": False})
+                out[r.id]["warming"] = (
+                    f"the sensor was still warming up ({rise:+.1f} °C during the run) and its "
+                    f"drift with the temperature is not known yet: not judged"
+                )
+        return out
+    for r in valid:
+        fit = _within(r)
+        if fit and fit.get("regressor") == "time_since_power_on_s" and fit["p_value"] < WARMING_P:
+            out[r.id] = {
+                "regressor": "time_since_power_on_s",
+                "applied": False,
+                "warming": (
+                    f"the sensor was still warming up: theta_y - theta_x drifted "
+                    f"{fit['slope_urad_per_unit'] * 60:+.1f} µm/m a minute during the run "
+                    f"(p = {fit['p_value']:.1g}), {fit['reference']:.0f} s after power-on; "
+                    f"warm it up first, or give it a temperature channel"
+                ),
+            }
+    return out
+
+
+def _run_drift(runs, in_baseline, before_ns):
+    """The across-night regression (reported only), or None when it cannot be fitted."""
     from imu_square.errors import AnalysisError
     from imu_square.monitor.drift import fit_run_drift
 
-    valid = [r for r in runs if r.valid]
-    if all(r.temperature_mean_c is not None for r in valid):
-        regressor = "temperature_c"
-    elif all(r.time_since_power_on_s is not None for r in valid):
-        regressor = "time_since_power_on_s"
+    used = [
+        r for r in runs if r.valid and (r.id in in_baseline or (r.recorded_at_ns or 0) >= before_ns)
+    ]
+    if used and all(r.temperature_mean_c is not None for r in used):
+        regressor, x = "temperature_c", [r.temperature_mean_c for r in used]
+    elif used and all(r.time_since_power_on_s is not None for r in used):
+        regressor, x = "time_since_power_on_s", [r.time_since_power_on_s for r in used]
     else:
-        return {}
-    base = [r for r in valid if r.id in in_baseline]
-    if not base:
-        return {}
-    x_ref = float(np.mean([_drift_x(r, regressor) for r in base]))
-    later = [r for r in valid if r.id not in in_baseline and (r.recorded_at_ns or 0) > after_ns]
-    out = {}
-    for k in range(len(later) + 1):
-        used = base + later[:k]
-        if len(used) < 3:
-            continue
-        try:
-            fit = fit_run_drift(
-                [r.squareness_rad for r in used],
-                [r.u_squareness_rad for r in used],
-                [_drift_x(r, regressor) for r in used],
-                regressor,
-                reference=x_ref,
-            )
-        except AnalysisError:  # the variable does not vary yet
-            continue
-        apply = len(used) >= DRIFT_MIN_RUNS and fit.p_value < DRIFT_P
-        target = later[k - 1] if k else None
-        if target is not None:
-            out[target.id] = (fit, apply)
-        else:
-            for r in base:
-                out[r.id] = (fit, False)
-    return out
+        return None
+    try:
+        return fit_run_drift(
+            [r.squareness_rad for r in used], [r.u_squareness_rad for r in used], x, regressor
+        )
+    except AnalysisError:
+        return None
 
 
 def _earlier(row, evaluation):

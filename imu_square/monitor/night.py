@@ -9,6 +9,7 @@ and stores the night's verdict. It never prints: the ``nightly`` and
 
 import math
 from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -79,12 +80,16 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None)
     -------
     RunRow
     """
+    if recording is not None:
+        recorded = int(recording.time_ns[0])
+    else:  # unreadable: its file's time, so that it sorts where it arrived, not last
+        recorded = Path(path).stat().st_mtime_ns
     base = {
         "machine_id": config.machine_id,
         "recording_path": str(path),
         "recording_sha256": sha256 or file_sha256(path),
         "settings": analysis_settings(config),
-        "recorded_at_ns": None if recording is None else int(recording.time_ns[0]),
+        "recorded_at_ns": recorded,
     }
     temps = {}
     uptime = None
@@ -102,6 +107,7 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None)
             **base, valid=False, invalid_reason=reason, time_since_power_on_s=uptime, **temps
         )
     doc = result.to_json_dict()
+    doc["sensor"] = {"model": recording.sensor.model, "serial": recording.sensor.serial}
     drift = None
     try:
         drift = fit_night_drift(result, recording).to_json_dict()
@@ -178,6 +184,16 @@ def analyse_recording(config, path, program=None, complete=True):
             recording,
             None,
             ("the recording's program differs from the monitor's: another circle test ran"),
+        )
+    recorded_on = recording.machine_id
+    if recording.metadata.get("producer") == "imu-square record" and recorded_on not in (
+        "",
+        config.machine_id,
+    ):
+        return (
+            recording,
+            None,
+            (f"the recording was made on machine {recorded_on!r}, not {config.machine_id!r}"),
         )
     try:
         result = analyze(recording, config.analysis.options(), program=program)
@@ -287,10 +303,11 @@ def judge_stored(config, history, run_id, inserted=True, result=None):
     if night.state == "stale_baseline" and baseline_row is not None and not baseline_row.stale:
         history.mark_baseline_stale(baseline_row.id, night.reason, at_ns=night.run.recorded_at_ns)
     statistics = {} if night.chart is None else night.chart.to_json_dict()
+    judged = baseline_row is not None and night.state != "no_baseline"
     history.add_evaluation(
         EvaluationRow(
             run_id=run_id,
-            baseline_id=None if baseline_row is None else baseline_row.id,
+            baseline_id=baseline_row.id if judged else None,
             state=night.state,
             change_rad=_finite(night.change_rad),
             u_change_rad=_finite(night.u_change_rad),
@@ -335,6 +352,9 @@ def night_record(assessment, night, line):
         "recorded_at": iso(run.recorded_at_ns),
         "valid": run.valid,
         "invalid_reason": run.invalid_reason,
+        "reason": night.reason,
+        "drift": _jsonable_drift(night.drift),
+        "drift_corrected": night.drift_corrected,
         "squareness_urad": _urad(run.squareness_rad),
         "u_squareness_urad": _urad(run.u_squareness_rad),
         "eps_c_deg": None if run.eps_c_rad is None else math.degrees(run.eps_c_rad),
@@ -354,6 +374,19 @@ def night_record(assessment, night, line):
     if math.isfinite(assessment.anchor_rad) and math.isfinite(night.change_rad):
         record["machine_squareness_urad"] = (assessment.anchor_rad + night.change_rad) / URAD
     return record
+
+
+def _jsonable_drift(drift):
+    """A night's drift correction with angles in µrad, or None."""
+    if not drift:
+        return None
+    out = {}
+    for k, v in drift.items():
+        if isinstance(v, float) and ("_rad" in k):
+            out[k.replace("_rad", "_urad")] = v / URAD
+        else:
+            out[k] = v
+    return out
 
 
 def _finite(x):

@@ -35,6 +35,39 @@ class NightFiles:
     alerts: object
 
 
+def ensure_folder(folder, what):
+    """Create ``folder`` if needed and check a file can be written in it, before any work.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The folder.
+    what : str
+        What goes there, for the message (e.g. ``"data"``).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    OutputError
+        One line naming the folder and why it cannot be used.
+    """
+    from imu_square.errors import OutputError
+    from imu_square.io.output import check_output_path
+
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(
+            f"{folder}: cannot create the {what} folder: {exc.strerror or exc}"
+        ) from None
+    check_output_path(folder / ".imu-square-probe", overwrite=True)
+    return folder
+
+
 def last_valid_result(assessment, options):
     """The analysis of the latest valid run whose recording is still on disk, and its path.
 

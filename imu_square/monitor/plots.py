@@ -22,6 +22,12 @@ _STATE_STYLE = {
 }
 
 
+def _legend(ax, ncol=1):
+    """A legend, when the axes hold something labelled (matplotlib warns otherwise)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7, ncol=ncol, loc="upper left")
+
+
 def _dates(nights):
     return [datetime_from_ns(n.run.recorded_at_ns) for n in nights]
 
@@ -77,6 +83,17 @@ def plot_trend(assessment, path, title=""):
                 lw=0.8,
                 label=state,
             )
+    latched = [n for n in judged if n.state == "alarm" and n.chart and n.chart.state != "alarm"]
+    if latched:
+        top.plot(
+            _dates(latched),
+            [n.change_rad / URAD for n in latched],
+            "s",
+            mfc="none",
+            mec="tab:red",
+            ms=9,
+            label="alarm standing",
+        )
     charted = [n for n in judged if n.chart is not None]
     if design is not None and charted:
         dates = _dates(charted)
@@ -109,11 +126,11 @@ def plot_trend(assessment, path, title=""):
         right.set_ylabel("machine squareness (anchored) [µm/m]")
     top.set_ylabel("change since the baseline [µm/m]")
     top.set_title(title or f"machine {assessment.machine_id}: squareness change")
-    top.legend(fontsize=7, ncol=3, loc="upper left")
+    _legend(top, ncol=3)
     top.grid(alpha=0.3)
     bottom.set_ylabel("chart statistic [z units]")
     bottom.set_title("EWMA and CUSUM on z = change / its uncertainty")
-    bottom.legend(fontsize=7, ncol=4, loc="upper left")
+    _legend(bottom, ncol=4)
     bottom.grid(alpha=0.3)
     bottom.xaxis.set_major_formatter(mdates.ConciseDateFormatter(mdates.AutoDateLocator()))
     fig.savefig(path, dpi=100)
@@ -151,7 +168,7 @@ def plot_sensor(assessment, path):
     base = assessment.baseline_row
     if base is not None:
         top.axhline(math.degrees(base.eps_c_rad), color="black", lw=0.8, label="baseline eps_c")
-        top.legend(fontsize=7)
+        _legend(top)
     top.set_ylabel("eps_c [deg]")
     top.set_title("sensor rotation about Z (a jump is a remount)")
     top.grid(alpha=0.3)

@@ -105,13 +105,17 @@ def expand_paths(items):
         if "://" in item:
             found.add(item)
             continue
-        path = Path(item).expanduser()
+        path = Path(item).expanduser().absolute()
         if path.is_dir():
             hits = [str(p) for p in path.rglob("*.mcap") if p.is_file()]
         elif path.is_file():
             hits = [str(path)]
         else:
-            hits = [h for h in glob.glob(str(path), recursive=True) if Path(h).is_file()]
+            hits = [
+                str(Path(h).absolute())
+                for h in glob.glob(str(path), recursive=True)
+                if Path(h).is_file()
+            ]
         if not hits:
             raise ReplayError(f"{item}: no recording there (a file, a folder of .mcap or a glob)")
         found.update(hits)

@@ -17,9 +17,12 @@ from imu_square.monitor.night import analyse_recording, run_row, stored_design
 from imu_square.monitor.rows import AnchorRow, BaselineRow
 from imu_square.units import MM, URAD
 
+# A machine tool squareness beyond 1 mm/m is a unit mistake, not a machine. [µm/m]
+MAX_ANCHOR_UM_PER_M = 1000.0
+
 
 def runs_for_baseline(config, history, items, program=None):
-    """The stored runs named by recording paths or run ids, analysing new recordings.
+    """The runs named by recording paths or run ids; new recordings analysed, not yet stored.
 
     Parameters
     ----------
@@ -35,34 +38,40 @@ def runs_for_baseline(config, history, items, program=None):
     Returns
     -------
     list of RunRow
+        Stored runs, and new ones (``id`` None) that :func:`set_baseline`
+        stores with the baseline, in one transaction: a refused baseline
+        stores nothing.
 
     Raises
     ------
     BaselineError
         A run that is invalid, unknown, or of another machine.
     """
+    from pathlib import Path
+
+    from imu_square.errors import HistoryError
+
     rows = []
     for item in items:
         if item.isdigit():
-            from imu_square.errors import HistoryError
-
             try:
                 row = history.run(int(item))
             except HistoryError:
                 raise BaselineError(f"run {item} is not in the history") from None
         else:
-            recording, result, reason = analyse_recording(config, item, program)
-            run_id, _ = history.add_run(run_row(config, item, recording, result, reason))
-            row = history.run(run_id)
+            path = Path(item).absolute()
+            recording, result, reason = analyse_recording(config, path, program)
+            row = run_row(config, path, recording, result, reason)
+            stored = history.run_by_hash(config.machine_id, row.recording_sha256, row.settings_hash)
+            row = stored or row
+        where = row.recording_path if row.id is None else f"run {row.id} ({row.recording_path})"
         if row.machine_id != config.machine_id:
             raise BaselineError(
-                f"run {row.id} ({row.recording_path}) is of machine {row.machine_id!r}, "
-                f"not {config.machine_id!r}"
+                f"{where} is of machine {row.machine_id!r}, not {config.machine_id!r}"
             )
         if not row.valid:
             raise BaselineError(
-                f"run {row.id} ({row.recording_path}) is invalid ({row.invalid_reason}): an "
-                f"invalid run never enters a baseline"
+                f"{where} is invalid ({row.invalid_reason}): an invalid run never enters a baseline"
             )
         rows.append(row)
     return rows
@@ -78,7 +87,8 @@ def set_baseline(config, history, runs, note=""):
     history : History
         The open history.
     runs : sequence of RunRow
-        Valid runs of the machine.
+        Valid runs of the machine; those not yet stored (``id`` None) are
+        stored with the baseline, in one transaction.
     note : str
         Free text kept with it.
 
@@ -87,19 +97,25 @@ def set_baseline(config, history, runs, note=""):
     BaselineRow
         As stored, with its alarm design.
     """
-    stats = compute_baseline([run_value(r) for r in runs])
-    row = BaselineRow(
-        machine_id=config.machine_id,
-        run_ids=tuple(r.id for r in runs),
-        squareness_mean_rad=stats.squareness_rad,
-        squareness_sd_rad=stats.sd_rad,
-        u_squareness_mean_rad=stats.u_squareness_rad,
-        eps_c_rad=stats.eps_c_rad,
-        u_eps_c_rad=stats.u_eps_c_rad,
-        dof=float(stats.dof),
-        note=note,
-    )
-    baseline_id = history.add_baseline(row)
+    keys = [r.recording_sha256 for r in runs]
+    if len(set(keys)) != len(keys):
+        raise BaselineError("the same recording is given twice: a baseline needs distinct runs")
+    stats = compute_baseline([run_value(r) for r in runs])  # refuses before storing anything
+    with history.transaction():
+        ids = tuple(r.id if r.id is not None else history.add_run(r)[0] for r in runs)
+        baseline_id = history.add_baseline(
+            BaselineRow(
+                machine_id=config.machine_id,
+                run_ids=ids,
+                squareness_mean_rad=stats.squareness_rad,
+                squareness_sd_rad=stats.sd_rad,
+                u_squareness_mean_rad=stats.u_squareness_rad,
+                eps_c_rad=stats.eps_c_rad,
+                u_eps_c_rad=stats.u_eps_c_rad,
+                dof=float(stats.dof),
+                note=note,
+            )
+        )
     stored_design(history, history.baseline(baseline_id), config.alarms)
     return history.baseline(baseline_id)
 
@@ -124,9 +140,13 @@ def anchor_by_ballbar(history, baseline_row, value_um_per_m, u_um_per_m=None, no
     -------
     AnchorRow
     """
-    for name, v in (("--ballbar", value_um_per_m), ("--u", u_um_per_m)):
-        if v is not None and not math.isfinite(v):
-            raise ImuSquareError(f"{name} must be a finite number in µm/m, got {v!r}")
+    if not (math.isfinite(value_um_per_m) and abs(value_um_per_m) <= MAX_ANCHOR_UM_PER_M):
+        raise ImuSquareError(
+            f"--ballbar must be a machine squareness in µm/m within ±{MAX_ANCHOR_UM_PER_M:g}, "
+            f"got {value_um_per_m!r}"
+        )
+    if u_um_per_m is not None and not (math.isfinite(u_um_per_m) and u_um_per_m > 0):
+        raise ImuSquareError(f"--u must be a standard uncertainty > 0 in µm/m, got {u_um_per_m!r}")
     row = AnchorRow(
         baseline_id=baseline_row.id,
         method="ballbar",

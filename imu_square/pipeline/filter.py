@@ -215,6 +215,13 @@ def filter_recording(recording, cutoff_hz, order):
     """
     fs = recording.sample_rate_hz
     raw = recording.accel.astype(np.float64)
+    bad = ~np.isfinite(raw)
+    if bad.any():
+        rows = np.flatnonzero(bad.any(axis=1))
+        raise AnalysisError(
+            f"{rows.size} sample(s) are not numbers (NaN or infinite), the first at "
+            f"{recording.time_s[rows[0]]:.3f} s: the recording is damaged"
+        )
     breaks = tuple(i for i, _ in recording.gaps())
     return FilteredRecording(
         t_s=recording.time_s,

@@ -118,7 +118,7 @@ def simulate_run(
         program=program,
         sensor=SensorInfo(
             model=sensor.model,
-            serial="simulated",
+            serial=f"sim-{sensor.model}"[:32],
             noise_density_m_s2_rthz=sensor.noise_density_m_s2_rthz,
             range_m_s2=sensor.range_m_s2,
             resolution_m_s2=sensor.resolution_m_s2 if sensor.resolution_m_s2 > 0 else math.nan,
