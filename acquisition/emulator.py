@@ -170,11 +170,12 @@ class EmulatedBoard:
                 scale_m_s2_per_count=scale,
                 range_m_s2=full_scale,
                 noise_density_m_s2_rthz=sensor.noise_density_m_s2_rthz,
-                has_temperature=False,
+                has_temperature=recording.temperature_c is not None,
                 mode=mode,
             )
         )
         self.counts = quantise(recording.accel, scale)
+        self.temperature_c = recording.temperature_c  # sent once a block, as a board does
         self.seq = seq_start + np.arange(len(self.counts), dtype=np.int64)
         self.link = Path(link)
         self.mode = mode
@@ -377,7 +378,10 @@ class EmulatedBoard:
         garbage = self._injector.garbage_before(start, seq0)
         if garbage:
             self._send(tx, garbage)
-        block = SampleBlock(seq0 % SEQ_MODULUS, self.counts[start:stop])
+        temperature = math.nan
+        if self.temperature_c is not None:
+            temperature = round(float(self.temperature_c[start]), 2)
+        block = SampleBlock(seq0 % SEQ_MODULUS, self.counts[start:stop], temperature_c=temperature)
         data = encode_block(block, self.mode)
         pieces = [data] if self.mode == "binary" else data.splitlines(keepends=True)
         n_here = stop - start if self.mode == "binary" else 1
@@ -462,7 +466,9 @@ class _TxBuffer:
         return entries
 
 
-def emulated_board(program, machine=None, sensor=None, *, faults=None, seed=0, **kwargs):
+def emulated_board(
+    program, machine=None, sensor=None, *, faults=None, seed=0, uptime_s=0.0, **kwargs
+):
     """Simulate a test and build the board that streams it.
 
     Parameters
@@ -478,6 +484,9 @@ def emulated_board(program, machine=None, sensor=None, *, faults=None, seed=0, *
         Faults to inject.
     seed : int
         Seed of the simulation's noise and of the faults.
+    uptime_s : float
+        How long the board has been powered when the test starts: its counter
+        starts there and its sensor is that far into its warm-up. [s]
     **kwargs
         Passed to :class:`EmulatedBoard` (``link``, ``speed``, ``mode``, ...).
 
@@ -493,7 +502,8 @@ def emulated_board(program, machine=None, sensor=None, *, faults=None, seed=0, *
     sensor = sensor if sensor is not None else SensorModel()
     if faults.clock_ppm:
         sensor = replace(sensor, clock_ppm=faults.clock_ppm)
-    recording, truth = simulate_run(program, machine, sensor, seed=seed)
+    recording, truth = simulate_run(program, machine, sensor, seed=seed, uptime_s=uptime_s)
+    kwargs.setdefault("seq_start", int(recording.seq[0]))
     board = EmulatedBoard(
         recording, faults=faults, seed=seed, clock_factor=1 + sensor.clock_ppm * 1e-6, **kwargs
     )

@@ -84,14 +84,16 @@ def register(sub):
     p.set_defaults(func=run)
 
 
-def _start_board(program, machine_file, sensor_file, seed, speed, link):
+def _start_board(program, machine_file, sensor_file, seed, speed, link, uptime_s=0.0):
     from acquisition.emulator import emulated_board
     from imu_square.simulate import data_path, read_machine, read_sensor
 
     machine = read_machine(machine_file or data_path("machine_typical.toml"))
     sensor = read_sensor(sensor_file or data_path("sensor_paper.toml"))
     seed = seed if seed is not None else secrets.randbits(31)
-    board, truth = emulated_board(program, machine, sensor, seed=seed, link=str(link), speed=speed)
+    board, truth = emulated_board(
+        program, machine, sensor, seed=seed, link=str(link), speed=speed, uptime_s=uptime_s
+    )
     thread = threading.Thread(target=board.run, name="emulated-board", daemon=True)
     thread.start()
     if not board.ready.wait(10.0):
@@ -107,7 +109,7 @@ def _record(
 ):
     """Record one run into ``stem.mcap``; an emulated board when ``port`` is None.
 
-    ``emulated`` is ``(machine_file, sensor_file, seed, speed)``. Returns the
+    ``emulated`` is ``(machine_file, sensor_file, seed, speed[, uptime_s])``. Returns the
     recording's path, the recorder's status, its exit code and the emulated
     run's truth (None for a real board).
     """
@@ -118,7 +120,7 @@ def _record(
     board = thread = truth = None
     if port is None:
         port = str(stem.with_suffix(".tty"))
-        board, thread, truth = _start_board(program, *emulated, port)
+        board, thread, truth = _start_board(program, *emulated[:4], port, *emulated[4:])
         print(
             f"emulated board on {port}: the circle test at x{emulated[3]:g} speed "
             f"({program.duration_s / emulated[3]:.0f} s)",
@@ -262,7 +264,7 @@ def run_monitor(args, config=None):
                 stem,
                 program,
                 port=None if config.sensor.emulated else config.sensor.port,
-                emulated=(emu.machine, emu.sensor, None, emu.speed),
+                emulated=(emu.machine, emu.sensor, None, emu.speed, emu.uptime_s),
                 baud=config.sensor.baud,
                 trigger=config.sensor.trigger,
                 machine_id=config.machine_id,

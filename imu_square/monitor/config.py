@@ -20,6 +20,7 @@ file, as ``imu-square init`` writes it::
     machine = ""                 # simulator machine file; "" = a typical machine
     sensor = ""                  # simulator sensor file; "" = the paper's sensor
     speed = 20.0                 # times faster than real time
+    uptime_s = 18000.0           # the board has been on this long (its sensor warm)
 
     [program]
     file = ""                    # the circle test's program file; "" = the paper's test
@@ -103,11 +104,15 @@ class EmulatedBoard:
         Simulator machine and sensor files; None for the built-in ones.
     speed : float
         Times faster than real time.
+    uptime_s : float
+        How long the emulated board has been on when the test starts (its
+        sensor's warm-up). [s]
     """
 
     machine: Path | None = None
     sensor: Path | None = None
     speed: float = 20.0
+    uptime_s: float = 18000.0
 
 
 @dataclass(frozen=True)
@@ -274,11 +279,12 @@ def monitor_from_mapping(doc, path):
         trigger=sen.choice("trigger", "marker", TRIGGERS),
         header_timeout_s=sen.number("header_timeout_s", 5.0, 0.0, 600.0, lo_open=True),
     )
-    emu = table("emulated", ("machine", "sensor", "speed"))
+    emu = table("emulated", ("machine", "sensor", "speed", "uptime_s"))
     emulated = EmulatedBoard(
         machine=emu.path("machine") if emu.text("machine", "", empty=True) else None,
         sensor=emu.path("sensor") if emu.text("sensor", "", empty=True) else None,
         speed=emu.number("speed", 20.0, 0.0, 1000.0, lo_open=True),
+        uptime_s=emu.number("uptime_s", 18000.0, 0.0, 1e9),
     )
     prog = table("program", ("file",))
     program = prog.path("file") if prog.text("file", "", empty=True) else None

@@ -54,6 +54,7 @@ header_timeout_s = 5.0
 machine = ""
 sensor = ""
 speed = 20.0
+uptime_s = 18000.0
 
 [program]
 # The circle test the machine runs (imu-square program writes its NC code); "" = the paper's test.
