@@ -201,3 +201,15 @@ def test_simulator_runs_each_feed_with_its_own_truth():
         gravity = ft["expected_squareness_rad"] - truth["expected_squareness_gravity_free_rad"]
         assert gravity == pytest.approx(q * kappa, abs=(q * 3e-4) ** 2)
     assert truth["expected_squareness_rad"] == truth["feeds"][0]["expected_squareness_rad"]
+
+
+def test_info_shows_each_feed(tmp_path, capsys):
+    from imu_square.io.mcap import write_mcap
+
+    program = program_from_mapping(with_(cycles_per_direction=[3, 2]))
+    rec, _ = simulate_run(program, MachineModel(), SensorModel(sample_rate_hz=100.0), seed=0)
+    path = tmp_path / "two.mcap"
+    write_mcap(rec, path)
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "feeds 6000 mm/min (period 3.142 s), 3000 mm/min (period 6.283 s)" in out
