@@ -1,8 +1,9 @@
 """The planner's prediction against simulated runs, and the estimator's efficiency.
 
 Acceptance (issue 9, section 2): for 6 plans spread over sensors (7 to 100
-ug/sqrt(Hz), white and 1/f noise), machines (0.1 to 5 m/s^2, 0.16 to 2.5 Hz,
-radii 20 to 250 mm), times (2 to 10 min) and one or two feeds, the predicted
+ug/sqrt(Hz), white and 1/f noise, 500 and 1000 Hz), machines (0.1 to 5 m/s^2,
+0.16 to 1.8 Hz, radii 15 to 100 mm), times (2 to 10 min), baselines and
+confidences, and one or two feeds, the predicted
 standard deviation of one run (``imu_square.planner``) is compared with the
 standard deviation of ``--runs`` simulated runs (40 by default), and the runs'
 mean with the truth: unbiased within 1 urad plus 3 standard errors. The
@@ -20,7 +21,7 @@ accuracy benchmark's kind x ``--seeds`` seeds.
 
 Usage::
 
-    python benchmarks/planner.py [--runs 40] [--workers 2] [--plans 1,3]
+    python benchmarks/planner.py [--runs 40] [--workers 2] [--plans 1,3] [--first-run 0]
     python benchmarks/planner.py --efficiency [--seeds 400]
 """
 
@@ -168,9 +169,9 @@ def _run(tasks, workers):
         return pool.map(_one, tasks, chunksize=4)
 
 
-def acceptance(runs, workers, names):
+def acceptance(runs, workers, names, first=0):
     t0 = time.time()
-    rows = _run([("plan", n, s) for n in names for s in range(runs)], workers)
+    rows = _run([("plan", n, s) for n in names for s in range(first, first + runs)], workers)
     table = []
     print(
         f"{'plan':50s} {'r mm':>5s} {'feeds mm/min':>14s} {'m/s^2':>6s} {'Hz':>5s} "
@@ -270,6 +271,9 @@ def main(argv=None):
     parser.add_argument("--runs", type=int, default=40, help="simulated runs per plan (40)")
     parser.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
     parser.add_argument("--plans", help="comma-separated plan numbers from 1 (default: all)")
+    parser.add_argument(
+        "--first-run", type=int, default=0, help="number of the first run: another set of seeds"
+    )
     parser.add_argument("--efficiency", action="store_true", help="measure the efficiency")
     parser.add_argument("--seeds", type=int, default=400, help="seeds per efficiency circle")
     args = parser.parse_args(argv)
@@ -280,7 +284,8 @@ def main(argv=None):
         names = list(PLANS)
         if args.plans:
             names = [names[int(i) - 1] for i in args.plans.split(",")]
-        result[f"acceptance_{args.runs}_runs"] = acceptance(args.runs, args.workers, names)
+        key = f"acceptance_{args.runs}_runs" + (f"_from_{args.first_run}" if args.first_run else "")
+        result[key] = acceptance(args.runs, args.workers, names, args.first_run)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=1))
     print(f"wrote {RESULTS}")

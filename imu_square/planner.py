@@ -60,14 +60,14 @@ from imu_square.program.spec import (
     TestProgram,
     program_from_mapping,
 )
-from imu_square.units import MM, MM_PER_MIN, SQUARENESS_UNIT, UG, URAD
+from imu_square.units import MM, MM_PER_MIN, SQUARENESS_UNIT, UG, URAD, G
 
 # The efficiency of the pipeline's estimator of theta_y - theta_x, the bound's
 # variance over the estimate's: measured by ``benchmarks/planner.py
 # --efficiency`` over 4 circles (0.1 to 6.4 m/s^2, 0.16 to 2.5 Hz, 5 to 40
-# cycles, white and 1/f noise) x 400 seeds each: 0.936 +- 0.033 (sd over the
-# bound 0.99 to 1.08; the bisquare's asymptotic efficiency on Gaussian noise
-# is 0.95).
+# cycles, white and 1/f noise) x 400 independent seeds each: 0.934 +- 0.033
+# (sd over the bound 0.97 to 1.08 by circle; the bisquare's asymptotic
+# efficiency on Gaussian noise is 0.95).
 ESTIMATOR_EFFICIENCY = 0.94
 
 # Fewest whole cycles per block a plan uses: the type A uncertainty is the
@@ -116,7 +116,7 @@ class SensorSpec:
     flicker_corner_hz : float
         1/f corner: the noise PSD is ``d^2 (1 + fc / f)``. [Hz]
     range_m_s2 : float
-        Full scale. [m/s^2]
+        Full scale (default: an ADXL355's 2.048 g). [m/s^2]
     sample_rate_hz : float
         Sample rate. [Hz]
     resolution_m_s2 : float
@@ -125,7 +125,7 @@ class SensorSpec:
 
     noise_density_m_s2_rthz: float
     flicker_corner_hz: float = 0.0
-    range_m_s2: float = 2.048 * 9.80665
+    range_m_s2: float = 2.048 * G
     sample_rate_hz: float = 1000.0
     resolution_m_s2: float = 0.0
 

@@ -19,6 +19,7 @@ from imu_square.planner import (
     Limits,
     PlanError,
     SensorSpec,
+    evaluate,
     plan_test,
     servo_leak,
     sigma_run,
@@ -235,3 +236,17 @@ def test_predicted_sigma_matches_simulated_runs():
     hi = math.sqrt(stats.chi2.ppf(0.9995, n - 1) / (n - 1))
     assert lo < sd / plan.sigma_run_rad < hi
     assert abs(np.mean(errors)) < 1 * URAD + 3.5 * sd / math.sqrt(n)
+
+
+def test_evaluate_says_what_a_given_program_resolves():
+    # the paper's test (2 x 15 cycles) with the paper's sensor: 70 urad / sqrt(e) per run;
+    # a 0.5 urad target is far out of reach: (z sigma_change / target)^2 times the cycles
+    limits = Limits(0.1, 0.1, 0.2, 400.0, (2e-3, 2e-3))
+    plan = evaluate(PAPER, SensorSpec(D7), limits, Goal(100 * URAD, 0.95, 4))
+    assert plan.servo_leak_rad == 0.0  # equal lags: no ellipse
+    assert plan.sigma_run_rad == pytest.approx(sigma_run(PAPER, SensorSpec(D7)), rel=1e-12)
+    assert plan.sigma_change_rad == pytest.approx(plan.sigma_run_rad * math.sqrt(1.25))
+    assert plan.detectable_change_rad == pytest.approx(1.959964 * plan.sigma_change_rad)
+    assert plan.detects is False
+    assert plan.analysed_s == pytest.approx(30 * 2 * math.pi, rel=1e-12)
+    assert plan.cutoff_hz == 4.0
