@@ -8,9 +8,12 @@ import pytest
 from imu_square.monitor.baseline import (
     MIN_RUNS,
     BaselineError,
+    REMOUNT_FLOOR_RAD,
+    REMOUNT_SIGMAS,
     RunValue,
     change_since,
     compute_baseline,
+    remount_tolerance,
 )
 
 EPS = math.radians(2.1)
@@ -65,11 +68,24 @@ def test_change_is_divided_by_cos_2eps_and_combines_both_uncertainties():
 
 @pytest.mark.parametrize(
     ("shift_deg", "remounted"),
-    [(0.0, False), (0.01, False), (0.04, False), (0.06, True), (-3.0, True)],
+    [(0.0, False), (0.015, False), (-0.015, False), (0.025, True), (0.06, True), (-3.0, True)],
 )
-def test_a_remount_is_an_eps_c_jump_beyond_five_sigma(shift_deg, remounted):
-    # u_eps 1.5e-4 rad (0.0086 deg) a night, the mean of 5 runs 6.7e-5: 5 sigma is 0.047 deg
+def test_a_remount_is_an_eps_c_jump_beyond_the_floor_when_the_runs_agree(shift_deg, remounted):
+    # five identical eps_c: no scatter, so the 0.02 deg floor is the tolerance
     b = compute_baseline([_run(0.0, day=i + 1) for i in range(5)])
+    assert remount_tolerance([EPS] * 5) == pytest.approx(REMOUNT_FLOOR_RAD)
     ch = change_since(b, _run(0.0, eps=EPS + math.radians(shift_deg), day=20))
     assert ch.remounted is remounted
     assert ch.eps_c_shift_rad == pytest.approx(math.radians(shift_deg), abs=1e-12)
+
+
+def test_the_remount_tolerance_grows_with_the_nights_scatter():
+    # sd 0.0082 deg over 4 runs: 8 sd sqrt(1 + 1/4) = 0.073 deg, above the floor
+    eps = EPS + np.radians([0.0, 0.01, -0.01, 0.0])
+    sd = float(np.std(eps, ddof=1))
+    assert remount_tolerance(eps) == pytest.approx(REMOUNT_SIGMAS * sd * math.sqrt(1.25))
+    assert remount_tolerance(eps) > 3 * REMOUNT_FLOOR_RAD
+    b = compute_baseline([_run(0.0, eps=e, day=i + 1) for i, e in enumerate(eps)])
+    tol = remount_tolerance(eps)
+    assert not change_since(b, _run(0.0, eps=EPS + 0.9 * tol, day=20), tol).remounted
+    assert change_since(b, _run(0.0, eps=EPS + 1.1 * tol, day=20), tol).remounted

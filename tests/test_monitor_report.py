@@ -107,7 +107,9 @@ def test_history_table_json_plot_since_and_backup(machine, tmp_path, capsys):
     assert "invalid" in captured.err and "baseline" in captured.err
     assert main(["history", "--config", config, "--json", "--since", "2026-09-05"]) == 0
     later = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert len(later) == 2 and all(r["recorded_at"] >= "2026-09-05" for r in later)
+    # nights 4 and 5 (09-05, 09-06) and the junk file, timed by its modification
+    assert [r["state"] for r in later] == ["ok", "ok", "invalid"]
+    assert all(r["recorded_at"] >= "2026-09-05" for r in later)
     assert main(["history", "--config", config, "--backup", str(tmp_path / "copy.db")]) == 0
     capsys.readouterr()
     assert main(["history", "--config", config, "--since", "5 Sept"]) == 2

@@ -65,3 +65,34 @@ def test_analyze_json_and_truth_keys_match_the_table(tmp_path, capsys):
     # a legacy key keeps its value beside the key that replaces it
     assert truth["alpha_rad"] == truth["machine_squareness_rad"]
     assert truth["expected_theta_diff_exact_rad"] == truth["expected_squareness_rad"]
+
+
+@pytest.mark.slow
+def test_separate_gravity_json_keys_match_the_table(tmp_path, capsys):
+    from imu_square.io.mcap import write_mcap
+    from imu_square.program import TestProgram
+    from imu_square.simulate import MachineModel, SensorModel, simulate_run
+
+    keys, _legacy = _documented()
+    program = TestProgram(
+        radius_m=0.05, feeds_m_per_s=(0.1, 0.05), cycles_per_feed=(4, 3), dwell_s=1.0
+    )
+    sensor = SensorModel(sample_rate_hz=200.0, noise_density_m_s2_rthz=1e-6)
+    rec, truth = simulate_run(program, MachineModel(tilt_per_m=(0, 1e-4, 0, 0)), sensor, seed=1)
+    path = tmp_path / "two.mcap"
+    write_mcap(rec, path)
+    assert main(["analyze", str(path), "--separate-gravity", "--json", "--bootstrap", "0"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc) == keys["separate"]
+    # each feed: its own keys and a plain result's (recording is both)
+    plain = keys["analyze"] - {"convergence"}
+    for feed in doc["feeds"]:
+        assert set(feed) == keys["feed"] | plain
+    assert set(truth["feeds"][0]) == {
+        "feed_mm_per_min",
+        "omega_rad_s",
+        "amplitude_m_s2",
+        "servo_mismatch_rad",
+        "gravity_phase_rad",
+        "expected_squareness_rad",
+    }

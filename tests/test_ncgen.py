@@ -1,5 +1,6 @@
 """NC code generation: the path a control would run equals the program's circle test."""
 
+import itertools
 import json
 import math
 import os
@@ -8,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from imu_square.cli import main
@@ -35,33 +36,36 @@ def angle_tol(program):
     return 4 * COORD_TOL_MM / (program.radius_m * 1e3) + 1e-12
 
 
-programs = st.builds(
-    lambda r, circ_acc, cycles, ov, start, order, dwell, runs, cx, cy: program_from_mapping(
-        {
-            "radius_mm": r,
-            # feed from a plausible centripetal acceleration, capped at 1.99 m/s,
-            # so that every draw is a valid program
-            "feed_mm_per_min": min(math.sqrt(circ_acc * r * 1e-3), 1.99) * 6e4,
-            "cycles_per_direction": cycles,
-            "overshoot_deg": ov,
-            "start_angle_deg": start,
-            "order": order,
-            "dwell_s": dwell,
-            "runs": runs,
-            "centre_mm": [cx, cy],
-        }
-    ),
-    r=st.floats(5.0, 1000.0),
-    circ_acc=st.floats(0.01, 19.0),
-    cycles=st.integers(2, 6),
-    ov=st.one_of(st.sampled_from([0.0, 90.0, 180.0, 360.0]), st.floats(0.0, 360.0)),
-    start=st.floats(-720.0, 720.0),
-    order=st.sampled_from([["ccw", "cw"], ["cw", "ccw"], ["ccw", "cw", "cw", "ccw"]]),
-    dwell=st.sampled_from([0.0, 0.25, 2.0]),
-    runs=st.integers(1, 3),
-    cx=st.floats(-500.0, 500.0),
-    cy=st.floats(-500.0, 500.0),
-)
+@st.composite
+def programs(draw):
+    """Valid programs: one feed, or two or three feeds with their own cycle counts."""
+    r = draw(st.floats(5.0, 1000.0))
+    n_feeds = draw(st.sampled_from([1, 1, 2, 3]))
+    # feeds from plausible centripetal accelerations, each a factor 1.2-4 below
+    # the previous one, capped at 1.99 m/s, so that every draw is a valid program
+    accs = [draw(st.floats(0.05, 19.0))]
+    for _ in range(n_feeds - 1):
+        accs.append(max(accs[-1] / draw(st.floats(1.2, 4.0)), 0.006))
+    feeds = [min(math.sqrt(a * r * 1e-3), 1.99) * 6e4 for a in accs]
+    assume(all(f1 >= 1.06 * f2 for f1, f2 in itertools.pairwise(feeds)))
+    cycles = [draw(st.integers(2, 6)) for _ in feeds]
+    table = {
+        "radius_mm": r,
+        "cycles_per_direction": cycles if n_feeds > 1 else cycles[0],
+        "overshoot_deg": draw(
+            st.one_of(st.sampled_from([0.0, 90.0, 180.0, 360.0]), st.floats(0.0, 360.0))
+        ),
+        "start_angle_deg": draw(st.floats(-720.0, 720.0)),
+        "order": draw(st.sampled_from([["ccw", "cw"], ["cw", "ccw"], ["ccw", "cw", "cw", "ccw"]])),
+        "dwell_s": draw(st.sampled_from([0.0, 0.25, 2.0] if n_feeds == 1 else [0.5, 2.0])),
+        "runs": draw(st.integers(1, 3)),
+        "centre_mm": [draw(st.floats(-500.0, 500.0)), draw(st.floats(-500.0, 500.0))],
+    }
+    if n_feeds > 1:
+        table["feeds_mm_per_min"] = feeds
+    else:
+        table["feed_mm_per_min"] = feeds[0]
+    return program_from_mapping(table)
 
 
 def split_blocks(trace):
@@ -86,14 +90,14 @@ def check_path(program, trace, marker_mcode=None):
     """Assert the parsed program runs the test the program describes."""
     cx, cy = (c * 1e3 for c in program.centre_m)
     r_mm = program.radius_m * 1e3
-    feed = program.feed_m_per_s * 6e4
+    feeds = [v * 6e4 for v in program.feeds]
     plans = program.blocks()
     blocks = split_blocks(trace)
     assert len(blocks) == len(plans)
 
     rapid, lead_in = trace.of_kind("rapid"), trace.of_kind("feed")
     assert len(rapid) == 1 and len(lead_in) == 1
-    assert lead_in[0].value == pytest.approx(feed, abs=1e-3)
+    assert lead_in[0].value == pytest.approx(feeds[0], abs=1e-3)
     start = (
         cx + r_mm * math.cos(program.start_angle_rad),
         cy + r_mm * math.sin(program.start_angle_rad),
@@ -103,7 +107,10 @@ def check_path(program, trace, marker_mcode=None):
     assert math.dist(rapid[0].end, start) == pytest.approx(approach, abs=2 * COORD_TOL_MM)
 
     for plan, block in zip(plans, blocks, strict=True):
-        assert block["tag"] == f"BLOCK {plan.index} RUN {plan.run} {plan.direction.upper()}"
+        tag = f"BLOCK {plan.index} RUN {plan.run} {plan.direction.upper()}"
+        if program.n_feeds > 1:
+            tag += f" FEED {feeds[plan.feed]:g}"
+        assert block["tag"] == tag
         arcs = [e for e in block["events"] if e.kind == "arc"]
         assert [e.kind for e in block["events"] if e.kind != "arc"] == (
             ["mcode", "mcode"] if marker_mcode is not None else []
@@ -115,10 +122,10 @@ def check_path(program, trace, marker_mcode=None):
         for a in arcs:
             assert math.dist(a.centre, (cx, cy)) <= COORD_TOL_MM
             assert a.radius_mm == pytest.approx(r_mm, abs=RADIUS_TOL_MM)
-            assert a.value == pytest.approx(feed, abs=1e-3)
+            assert a.value == pytest.approx(feeds[plan.feed], abs=1e-3)
         total = sum(a.angle_rad for a in arcs)
         tol = len(arcs) * angle_tol(program)
-        assert total == pytest.approx(program.block_angle_rad, abs=tol)
+        assert total == pytest.approx(program.at_feed(plan.feed).block_angle_rad, abs=tol)
         # the block starts at its planned angle
         a0 = math.atan2(arcs[0].start[1] - cy, arcs[0].start[0] - cx)
         assert math.remainder(a0 - plan.start_angle_rad, 2 * math.pi) == pytest.approx(
@@ -141,7 +148,7 @@ def check_path(program, trace, marker_mcode=None):
 
 @pytest.mark.parametrize("dialect", DIALECTS)
 @settings(max_examples=25, deadline=None)
-@given(program=programs)
+@given(program=programs())
 def test_generated_path_matches_program(dialect, program):
     text = generate_nc(program, dialect)
     check_path(program, parse_nc(text, dialect))
@@ -362,6 +369,14 @@ INCH_MM = 25.4  # the interpreter's canonical calls are in inches
             centre_m=(-0.3, 0.12),
         ),
         TestProgram(cycles_per_direction=2, overshoot_rad=math.radians(300.0)),
+        TestProgram(
+            radius_m=0.025,
+            feeds_m_per_s=(0.4, 0.15),
+            cycles_per_feed=(6, 3),
+            runs=2,
+            dwell_s=1.0,
+            centre_m=(0.1, 0.1),
+        ),
     ],
 )
 def test_linuxcnc_interpreter_runs_the_test(tmp_path, program):
@@ -371,7 +386,7 @@ def test_linuxcnc_interpreter_runs_the_test(tmp_path, program):
 
 
 @settings(max_examples=8, deadline=None)
-@given(program=programs)
+@given(program=programs())
 def test_linuxcnc_interpreter_runs_any_program(tmp_path_factory, program):
     path = tmp_path_factory.mktemp("nc") / "warmup.ngc"
     path.write_text(generate_nc(program, "linuxcnc", marker_mcode=199))
@@ -388,11 +403,12 @@ def check_interpreted(program, out):
     blocks = []
     start_dwell = []
     previous = None
+    feed = None
     for name, *args in out["events"]:
         if name in ("straight_traverse", "straight_feed"):
             pos = (args[0] * INCH_MM, args[1] * INCH_MM)
         elif name == "comment" and args[0].startswith("IMU-SQUARE START"):
-            blocks.append({"angle": 0.0, "rot": set(), "markers": []})
+            blocks.append({"angle": 0.0, "rot": set(), "markers": [], "feeds": set()})
         elif name == "dwell" and not blocks:
             start_dwell.append((previous, args[0]))
         elif name == "user_defined_function":
@@ -401,9 +417,9 @@ def check_interpreted(program, out):
         elif name == "dwell":
             blocks[-1]["dwell_after"] = args[0]
         elif name == "set_feed_rate" and args[0] > 0:
-            # F is written with 3 decimals
-            assert args[0] * INCH_MM == pytest.approx(program.feed_m_per_s * 6e4, abs=5e-4)
+            feed = args[0] * INCH_MM
         elif name == "arc_feed":
+            blocks[-1]["feeds"].add(feed)
             x1, y1, acx, acy = (a * INCH_MM for a in args[:4])
             rot = args[4]
             assert math.dist((acx, acy), (cx, cy)) <= COORD_TOL_MM
@@ -425,9 +441,13 @@ def check_interpreted(program, out):
     assert len(blocks) == len(plans)
     for plan, block in zip(plans, blocks, strict=True):
         assert block["rot"] == {plan.sign}
-        tol = len(block_arcs_deg(program)) * angle_tol(program)
-        assert block["markers"] == pytest.approx([0.0, program.block_angle_rad], abs=tol)
-        assert block["angle"] == pytest.approx(program.block_angle_rad, abs=tol)
+        # every arc of the block at the block's feed (F is written with 3 decimals)
+        assert len(block["feeds"]) == 1
+        assert block["feeds"].pop() == pytest.approx(program.feeds[plan.feed] * 6e4, abs=5e-4)
+        block_angle = program.at_feed(plan.feed).block_angle_rad
+        tol = len(block_arcs_deg(program, plan.feed)) * angle_tol(program)
+        assert block["markers"] == pytest.approx([0.0, block_angle], abs=tol)
+        assert block["angle"] == pytest.approx(block_angle, abs=tol)
     dwells = [b["dwell_after"] for b in blocks[:-1] if "dwell_after" in b]
     expected = [program.dwell_s] * (len(plans) - 1) if program.dwell_s > 0 else []
     assert dwells == pytest.approx(expected, abs=5e-4)

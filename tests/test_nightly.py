@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from imu_square.cli import main
 
 PROGRAM = """[program]
@@ -31,3 +33,32 @@ def test_nightly_on_the_emulated_board_recovers_the_truth(tmp_path, capsys):
     # The built-in typical machine has 0.5 ms of servo mismatch: m = omega * 0.5 ms.
     assert abs(result["servo_mismatch_urad"] - 6.0 * 0.5e-3 * 1e6) <= 3 * 200
     assert "truth (simulator)" in captured.err
+
+
+TWO_FEEDS = """[program]
+radius_mm = 25.0
+feeds_mm_per_min = [9000.0, 4500.0]
+cycles_per_direction = [10, 5]
+dwell_s = 1.0
+"""
+
+
+@pytest.mark.slow
+def test_nightly_with_two_feeds_separates_gravity(tmp_path, capsys):
+    program = tmp_path / "p.toml"
+    program.write_text(TWO_FEEDS)
+    out = tmp_path / "out"
+    code = main(
+        ["nightly", "--program", str(program), "--speed", "10", "--seed", "4", "--out", str(out)]
+    )
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    result = json.loads(captured.out.strip().splitlines()[-1])
+    assert [f["feed_mm_per_min"] for f in result["feeds"]] == [9000.0, 4500.0]
+    assert [f["cycles_used"] for f in result["feeds"]] == [
+        {"ccw": 10, "cw": 10},
+        {"ccw": 5, "cw": 5},
+    ]
+    # the truth freed of gravity coupling lies within three standard uncertainties
+    assert abs(result["error_urad"]) <= 3 * result["u_squareness_urad"]
+    assert "freed of gravity coupling" in captured.err

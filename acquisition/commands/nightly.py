@@ -183,25 +183,38 @@ def run_single(args):
         machine_id=args.machine_id,
         quiet=args.quiet,
     )
-    try:
-        result = analyze(read_mcap(mcap_path))
-    except AnalysisError as exc:  # the pipeline names no file: say which
-        raise AnalysisError(f"{mcap_path}: {exc}") from None
+    recording = read_mcap(mcap_path)
+    if program.n_feeds > 1:
+        # several feeds of one circle: the squareness freed of gravity coupling
+        from imu_square.pipeline.gravity import analyze_feeds, separate_gravity
+
+        feeds = analyze_feeds([(str(mcap_path), recording)])  # its errors name the file
+        result = separate_gravity(feeds)
+        results = [f.result for f in feeds]
+        expected_key = "expected_squareness_gravity_free_rad"
+    else:
+        try:
+            result = analyze(recording)
+        except AnalysisError as exc:  # the pipeline names no file: say which
+            raise AnalysisError(f"{mcap_path}: {exc}") from None
+        results = [result]
+        expected_key = "expected_squareness_rad"
     doc = result.to_json_dict()
     doc["recording"] = str(mcap_path)
     doc["recording_complete"] = status.complete
     if truth is not None:
         stem.with_suffix(".truth.json").write_text(json.dumps(truth, indent=1) + "\n")
         # What theta_y - theta_x should read on this circle: local squareness,
-        # sensor non-orthogonality and any gravity-coupling phase, seen through
-        # the sensor's rotation (simulate prints the same key).
-        expected = truth["expected_squareness_rad"]
+        # sensor non-orthogonality and any gravity-coupling phase (none when the
+        # feeds separate it), seen through the sensor's rotation (simulate prints
+        # the same key).
+        expected = truth[expected_key]
         error = result.squareness_rad - expected
         doc["expected_squareness_urad"] = expected / URAD
         doc["truth_expected_urad"] = expected / URAD  # old name, kept for one release
         doc["error_urad"] = error / URAD
     stem.with_suffix(".result.json").write_text(json.dumps(doc, indent=1) + "\n")
-    plot_results([result], stem.with_suffix(".png"), title=str(mcap_path))
+    plot_results(results, stem.with_suffix(".png"), title=str(mcap_path))
 
     print(f"{mcap_path}: {result.summary()}", file=sys.stderr)
     if truth is not None:

@@ -24,6 +24,13 @@ def register(sub):
     )
     p.add_argument("--order", type=int, default=1, help="low-pass order (default: %(default)s)")
     p.add_argument(
+        "--separate-gravity",
+        action="store_true",
+        help="fit the same circle at two feeds or more jointly (a recording of a program with "
+        "feeds_mm_per_min, or one recording per feed) and report the squareness freed of "
+        "gravity coupling, the coupling, and each feed's plain result; --json writes one object",
+    )
+    p.add_argument(
         "--bootstrap",
         type=int,
         default=200,
@@ -46,11 +53,14 @@ def run(args):
         cutoff_hz=args.cutoff_hz, order=args.order, bootstrap_n=args.bootstrap
     )
     program = read_program(args.program) if args.program else None
+    if args.separate_gravity:
+        return _run_separated(args, options, program)
     results = []
     status = 0
     for path in args.recordings:
         try:
             recording = read_mcap(path)  # its errors name the file
+            _check_one_feed(program or recording.program)
             result = analyze(recording, options, program=program)
         except AnalysisError as exc:  # the pipeline names no file: say which
             print(f"imu-square analyze: error: {path}: {exc}", file=sys.stderr)
@@ -82,3 +92,41 @@ def run(args):
         plot_results(results, args.plot, convergence([r.squareness_rad for r in results]), title)
         print(f"wrote {args.plot}", file=sys.stderr)
     return status
+
+
+def _check_one_feed(program):
+    """Refuse a multi-feed program without --separate-gravity, saying what to do."""
+    from imu_square.errors import AnalysisError
+
+    if program is not None and program.n_feeds > 1:
+        feeds = ", ".join(f"{v * 6e4:g}" for v in program.feeds)
+        raise AnalysisError(
+            f"the program runs {program.n_feeds} feeds ({feeds} mm/min): analyse it with "
+            "--separate-gravity, which also reports each feed's plain result"
+        )
+
+
+def _run_separated(args, options, program):
+    """Fit every feed of every recording jointly; one JSON object for all."""
+    from imu_square.io.mcap import read_mcap
+    from imu_square.pipeline.gravity import analyze_feeds, separate_gravity
+
+    # the messages of reading and of the pipeline name the file (and the feed)
+    sources = [(path, read_mcap(path)) for path in args.recordings]
+    feeds = analyze_feeds(sources, options, program)
+    for f in feeds:
+        label = f"{f.source} at {f.feed_mm_per_min:g} mm/min"
+        print(f"{label}: {f.result.summary()}", file=sys.stderr)
+    separation = separate_gravity(feeds)
+    print(f"{len(feeds)} feeds: {separation.summary()}", file=sys.stderr)
+    if args.json:
+        doc = {"recordings": list(args.recordings), **separation.to_json_dict()}
+        print(json.dumps(doc), file=sys.stdout, flush=True)
+    if args.plot:
+        from imu_square.pipeline.plot import plot_results
+
+        last = feeds[-1]
+        title = f"{last.source} at {last.feed_mm_per_min:g} mm/min (the last of {len(feeds)} feeds)"
+        plot_results([f.result for f in feeds], args.plot, title=title)
+        print(f"wrote {args.plot}", file=sys.stderr)
+    return 0

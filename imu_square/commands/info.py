@@ -43,6 +43,16 @@ def _text(path, summary):
     prog = s["program"]
     if prog is None:
         lines.append("  program    none")
+    elif "feeds_mm_per_min" in prog:
+        feeds = ", ".join(
+            f"{v:g} mm/min (period {t:.3f} s)"
+            for v, t in zip(prog["feeds_mm_per_min"], prog["period_s"], strict=True)
+        )
+        lines.append(
+            f"  program    r={prog['radius_mm']:g} mm, feeds {feeds}, "
+            f"{prog['cycles_per_direction']} cycles, {prog['n_blocks']} blocks "
+            f"({' '.join(prog['order'])} x {prog['runs']} per feed), {prog['duration_s']:.1f} s"
+        )
     else:
         lines.append(
             f"  program    r={prog['radius_mm']:g} mm, v={prog['feed_mm_per_min']:g} mm/min, "

@@ -61,7 +61,18 @@ def run(args):
     truth_path.write_text(json.dumps(truth, indent=2) + "\n", encoding="utf-8")
     square = f"{round(truth['squareness_rad'] / URAD, 2) + 0.0:.2f} {SQUARENESS_UNIT}"
     expected = f"{round(truth['expected_squareness_rad'] / URAD, 2) + 0.0:.2f} {SQUARENESS_UNIT}"
-    if expected != square:
+    if program.n_feeds > 1:
+        per_feed = ", ".join(
+            f"{round(f['expected_squareness_rad'] / URAD, 2) + 0.0:.2f} {SQUARENESS_UNIT} at "
+            f"{f['feed_mm_per_min']:g} mm/min"
+            for f in truth["feeds"]
+        )
+        free = round(truth["expected_squareness_gravity_free_rad"] / URAD, 2) + 0.0
+        square += (
+            f" (expected theta_y - theta_x on this circle {per_feed}; "
+            f"{free:.2f} {SQUARENESS_UNIT} freed of gravity coupling)"
+        )
+    elif expected != square:
         square += f" (expected theta_y - theta_x on this circle {expected})"
     print(
         f"{out}: {recording.n_samples} samples, {recording.duration_s:.1f} s, "

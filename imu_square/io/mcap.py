@@ -1022,7 +1022,10 @@ def summarize(recording):
         if program is None
         else {
             **program.to_mapping(),
-            "period_s": program.period_s,
+            # one period per feed in a multi-feed program
+            "period_s": program.period_s
+            if program.n_feeds == 1
+            else [program.at_feed(f).period_s for f in range(program.n_feeds)],
             "n_blocks": program.n_blocks,
             "duration_s": program.duration_s,
         },

@@ -13,7 +13,9 @@ The generated program is the nightly warm-up cycle of a :class:`TestProgram`:
    first arc (the ``eps_c`` anchor relies on the block starting from rest);
 3. every block of ``program.blocks()`` as circular arcs around
    ``program.centre_m`` (G3 for CCW, G2 for CW, centre given by incremental
-   I/J), travelling ``overshoot + cycles * 360 + overshoot`` degrees;
+   I/J), travelling ``overshoot + cycles * 360 + overshoot`` degrees, its
+   feed word on its first arc (a multi-feed program runs its feeds one
+   after the other, each with its own cycle count);
 4. a dwell of ``program.dwell_s`` between blocks;
 5. markers: a comment naming block index, run and direction at the start and
    the end of each block and, if asked, a user M-code at both places, which
@@ -148,23 +150,25 @@ def _point_mm(program, angle_rad):
     )
 
 
-def block_arcs_deg(program):
+def block_arcs_deg(program, feed=0):
     """Signless arc angles of one block, in execution order.
 
     Parameters
     ----------
     program : TestProgram
         The program.
+    feed : int
+        Index of the block's feed (its cycle count) in a multi-feed program.
 
     Returns
     -------
     list of float
         Arc angles, each in [180, 360]; their sum is
-        ``2 * overshoot + 360 * cycles_per_direction``. [deg]
+        ``2 * overshoot + 360 * cycles`` with the feed's cycles per direction. [deg]
     """
     edge = 180.0 + math.degrees(program.overshoot_rad)
     edge_arcs = [edge] if edge <= 360.0 else [edge / 2, edge / 2]
-    return [*edge_arcs, *([360.0] * (program.cycles_per_direction - 1)), *edge_arcs]
+    return [*edge_arcs, *([360.0] * (program.feed_cycles[feed] - 1)), *edge_arcs]
 
 
 def generate_nc(program, dialect, marker_mcode=None, feed_override_safe=False, approach_mm=None):
@@ -216,17 +220,18 @@ def generate_nc(program, dialect, marker_mcode=None, feed_override_safe=False, a
             f"approach_mm must be in (0, radius_mm={radius_mm:g}), got {approach_mm!r}"
         )
 
-    feed = f"F{program.feed_m_per_s * 6e4:.3f}"
+    feeds = [f"F{v * 6e4:.3f}" for v in program.feeds]
     cx_mm, cy_mm = (c * 1e3 for c in program.centre_m)
     lines = []
     if dialect == "fanuc":
         lines += ["%", "O1000 (IMU-SQUARE WARM-UP)"]
     else:
         lines.append(_comment(dialect, "IMU-SQUARE WARM-UP"))
+    speeds = " ".join(f"{v * 6e4:g}" for v in program.feeds)
     lines.append(
         _comment(
             dialect,
-            f"R {radius_mm:g} MM FEED {program.feed_m_per_s * 6e4:g} MM/MIN "
+            f"R {radius_mm:g} MM FEED{'S' if program.n_feeds > 1 else ''} {speeds} MM/MIN "
             f"CENTRE X{cx_mm:g} Y{cy_mm:g} - SET Z TO A SAFE HEIGHT BEFORE START",
         )
     )
@@ -246,16 +251,18 @@ def generate_nc(program, dialect, marker_mcode=None, feed_override_safe=False, a
     ay = _fmt(cy_mm + inner * math.sin(start))
     x, y = _point_mm(program, start)
     lines.append(f"G0 X{ax} Y{ay}")
-    lines.append(f"G1 X{x} Y{y} {feed}")
+    lines.append(f"G1 X{x} Y{y} {feeds[0]}")
     lines.append(_dwell(dialect, max(program.dwell_s, START_DWELL_S)))
     if feed_override_safe:
         lines.append("M50 P0")
 
-    arcs = block_arcs_deg(program)
     for block in program.blocks():
+        arcs = block_arcs_deg(program, block.feed)
         if block.index > 0 and program.dwell_s > 0:
             lines.append(_dwell(dialect, program.dwell_s))
         tag = f"BLOCK {block.index} RUN {block.run} {block.direction.upper()}"
+        if program.n_feeds > 1:
+            tag += f" FEED {program.feeds[block.feed] * 6e4:g}"
         lines.append(_comment(dialect, f"IMU-SQUARE START {tag}"))
         if marker_mcode is not None:
             lines.append(f"M{marker_mcode}")
@@ -268,7 +275,7 @@ def generate_nc(program, dialect, marker_mcode=None, feed_override_safe=False, a
             if arc_deg < 360.0:
                 x, y = _point_mm(program, angle)
             words = f"{gword} X{x} Y{y} I{i_mm} J{j_mm}"
-            lines.append(f"{words} {feed}" if i == 0 else words)
+            lines.append(f"{words} {feeds[block.feed]}" if i == 0 else words)
         if marker_mcode is not None:
             lines.append(f"M{marker_mcode}")
         lines.append(_comment(dialect, f"IMU-SQUARE END {tag}"))

@@ -14,6 +14,17 @@ A program file is TOML in the units machinists use (mm, mm/min, degrees)::
     runs = 1
     centre_mm = [0.0, 0.0]      # optional: circle centre in machine coordinates
 
+A program may run the same circle at several feeds, to separate what scales
+with the feed (the inertial signal, ``v^2/r``) from what does not (gravity
+coupling through a table tilt that changes with position)::
+
+    feeds_mm_per_min = [6000.0, 3000.0]   # instead of feed_mm_per_min
+    cycles_per_direction = [15, 8]        # one count per feed, or one for all
+
+The blocks run feed by feed: every run of ``order`` at the first feed, then
+at the second, and so on, so that each feed's blocks form one stretch of the
+recording (a logger that writes one file per feed cuts there).
+
 Inside the code everything is SI. Position angle ``phi`` is the commanded
 angle of the tool on the circle, measured from +X towards +Y; a CCW block
 increases it, a CW block decreases it. Each block runs
@@ -21,9 +32,10 @@ increases it, a CW block decreases it. Each block runs
 where the previous block ended; only the middle whole cycles are analysed.
 """
 
+import itertools
 import math
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 from imu_square.errors import ProgramError, check_option
 from imu_square.textfile import read_text
@@ -38,6 +50,16 @@ MIN_CENTRIPETAL_M_S2 = 0.005
 MAX_CENTRIPETAL_M_S2 = 20.0
 MAX_RADIUS_M = 1.0
 MAX_FEED_M_PER_S = 2.0
+# A multi-feed program: at most this many feeds, and each feed at least this
+# factor from every other (their v^2/r then differ by 10 %; closer feeds
+# cannot separate a feed-independent term: its uncertainty grows as
+# A1 / (A1 - A2)).
+MAX_FEEDS = 8
+MIN_FEED_RATIO = 1.05
+# Between the blocks of a multi-feed program the table must come to rest for
+# this long, so that the analysis tells the feeds apart (longer than the
+# settling of its low-pass, 0.27 s at the paper's 4 Hz). [s]
+MIN_FEEDS_DWELL_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -61,6 +83,9 @@ class BlockPlan:
     analysed_start_rad : float
         Position angle where the first analysed cycle starts (after the
         overshoot). [rad]
+    feed : int
+        Index of the block's feed in :attr:`TestProgram.feeds_m_per_s` (0 for a
+        one-feed program).
     """
 
     index: int
@@ -71,6 +96,7 @@ class BlockPlan:
     t_start_s: float
     t_end_s: float
     analysed_start_rad: float
+    feed: int = 0
 
     @property
     def duration_s(self):
@@ -97,9 +123,10 @@ class TestProgram:
     radius_m : float
         Circle radius. [m]
     feed_m_per_s : float
-        Programmed path speed. [m/s]
+        Programmed path speed; the first feed of a multi-feed program. [m/s]
     cycles_per_direction : int
-        Whole analysed cycles in each block.
+        Whole analysed cycles in each block; the first feed's in a multi-feed
+        program.
     overshoot_rad : float
         Extra motion at the start and at the end of each block. [rad]
     start_angle_rad : float
@@ -112,6 +139,20 @@ class TestProgram:
         Number of repetitions of ``order``.
     centre_m : tuple of float
         Circle centre in machine coordinates. [m]
+    feeds_m_per_s : tuple of float
+        Every feed of a multi-feed program, in the order they run; empty for a
+        one-feed program (a single feed is normalised to empty). [m/s]
+    cycles_per_feed : tuple of int
+        Whole analysed cycles per block at each feed; empty when every feed
+        runs ``cycles_per_direction`` (equal counts are normalised to empty).
+
+    Notes
+    -----
+    The quantities of one circle (:attr:`omega_rad_s`, :attr:`period_s`,
+    :attr:`centripetal_m_s2`, :attr:`block_angle_rad`, ...) exist only for a
+    one-feed program; a multi-feed program raises :class:`ProgramError` for
+    them rather than answer for one of its feeds. :meth:`at_feed` gives the
+    one-feed program of each feed.
     """
 
     __test__ = False  # not a pytest test class, despite the name
@@ -126,49 +167,130 @@ class TestProgram:
     dwell_s: float = 2.0
     runs: int = 1
     centre_m: tuple = field(default=(0.0, 0.0))
+    feeds_m_per_s: tuple = ()
+    cycles_per_feed: tuple = ()
+
+    def __post_init__(self):
+        feeds = tuple(float(v) for v in self.feeds_m_per_s)
+        if len(feeds) == 1:
+            object.__setattr__(self, "feed_m_per_s", feeds[0])
+            feeds = ()
+        elif feeds:
+            object.__setattr__(self, "feed_m_per_s", feeds[0])
+        object.__setattr__(self, "feeds_m_per_s", feeds)
+        cycles = tuple(int(c) for c in self.cycles_per_feed)
+        if cycles:
+            if len(cycles) != max(len(feeds), 1):
+                raise ValueError(
+                    f"cycles_per_feed needs one count per feed ({max(len(feeds), 1)}), "
+                    f"got {cycles!r}"
+                )
+            object.__setattr__(self, "cycles_per_direction", cycles[0])
+            if len(set(cycles)) == 1:
+                cycles = ()
+        object.__setattr__(self, "cycles_per_feed", cycles)
+
+    @property
+    def n_feeds(self):
+        """Number of feeds the circle runs at."""
+        return max(len(self.feeds_m_per_s), 1)
+
+    @property
+    def feeds(self):
+        """Every feed, in the order they run (one for a one-feed program). [m/s]"""
+        return self.feeds_m_per_s or (self.feed_m_per_s,)
+
+    @property
+    def feed_cycles(self):
+        """Whole analysed cycles per block at each feed."""
+        return self.cycles_per_feed or (self.cycles_per_direction,) * self.n_feeds
+
+    def _one_feed(self, name):
+        if self.n_feeds > 1:
+            feeds = ", ".join(f"{v * 6e4:g}" for v in self.feeds)
+            raise ProgramError(
+                f"{name}: the program runs {self.n_feeds} feeds ({feeds} mm/min) and has no "
+                f"single {name}; take each feed's program (at_feed) or analyse the feeds "
+                f"together (analyze --separate-gravity)"
+            )
+
+    def at_feed(self, feed):
+        """The one-feed program of one feed's blocks.
+
+        Parameters
+        ----------
+        feed : int
+            Index into :attr:`feeds`.
+
+        Returns
+        -------
+        TestProgram
+            Same circle, ``order``, ``runs``, overshoot and dwell, at that feed
+            with its cycle count, starting at the angle where that feed's first
+            block starts; its blocks are that feed's blocks, numbered from 0.
+        """
+        if not 0 <= feed < self.n_feeds:
+            raise ProgramError(f"feed index must be in [0, {self.n_feeds - 1}], got {feed!r}")
+        if self.n_feeds == 1:
+            return self
+        first = next(b for b in self.blocks() if b.feed == feed)
+        return replace(
+            self,
+            feed_m_per_s=self.feeds[feed],
+            cycles_per_direction=self.feed_cycles[feed],
+            start_angle_rad=first.start_angle_rad,
+            feeds_m_per_s=(),
+            cycles_per_feed=(),
+        )
 
     @property
     def omega_rad_s(self):
-        """Angular speed of the tool on the circle. [rad/s]"""
+        """Angular speed of the tool on the circle (one-feed program). [rad/s]"""
+        self._one_feed("omega_rad_s")
         return self.feed_m_per_s / self.radius_m
 
     @property
     def frequency_hz(self):
-        """Circle frequency. [Hz]"""
+        """Circle frequency (one-feed program). [Hz]"""
+        self._one_feed("frequency_hz")
         return self.omega_rad_s / (2 * math.pi)
 
     @property
     def period_s(self):
-        """Time for one full cycle at the programmed feed. [s]"""
+        """Time for one full cycle at the programmed feed (one-feed program). [s]"""
+        self._one_feed("period_s")
         return 2 * math.pi / self.omega_rad_s
 
     @property
     def centripetal_m_s2(self):
-        """Centripetal acceleration v^2/r at the programmed feed. [m/s^2]"""
+        """Centripetal acceleration v^2/r at the programmed feed (one-feed program). [m/s^2]"""
+        self._one_feed("centripetal_m_s2")
         return self.feed_m_per_s**2 / self.radius_m
 
     @property
     def block_angle_rad(self):
-        """Total angle travelled in one block, overshoots included. [rad]"""
+        """Total angle travelled in one block, overshoots included (one-feed program). [rad]"""
+        self._one_feed("block_angle_rad")
         return 2 * math.pi * self.cycles_per_direction + 2 * self.overshoot_rad
 
     @property
     def block_duration_s(self):
-        """Nominal duration of one block at constant feed. [s]"""
+        """Nominal duration of one block at constant feed (one-feed program). [s]"""
+        self._one_feed("block_duration_s")
         return self.block_angle_rad / self.omega_rad_s
 
     @property
     def n_blocks(self):
-        """Number of blocks over all runs."""
-        return len(self.order) * self.runs
+        """Number of blocks over all runs and feeds."""
+        return len(self.order) * self.runs * self.n_feeds
 
     @property
     def duration_s(self):
         """Nominal duration from the start of the first block to the end of the last. [s]"""
-        return self.n_blocks * self.block_duration_s + (self.n_blocks - 1) * self.dwell_s
+        return self.blocks()[-1].t_end_s
 
     def blocks(self):
-        """Nominal plan of every block, in execution order.
+        """Nominal plan of every block, in execution order (feed by feed).
 
         Returns
         -------
@@ -177,23 +299,27 @@ class TestProgram:
         plans = []
         angle = self.start_angle_rad
         t = 0.0
-        for run in range(self.runs):
-            for direction in self.order:
-                sign = 1 if direction == "ccw" else -1
-                plans.append(
-                    BlockPlan(
-                        index=len(plans),
-                        run=run,
-                        direction=direction,
-                        sign=sign,
-                        start_angle_rad=angle,
-                        t_start_s=t,
-                        t_end_s=t + self.block_duration_s,
-                        analysed_start_rad=angle + sign * self.overshoot_rad,
+        for feed, (speed, cycles) in enumerate(zip(self.feeds, self.feed_cycles, strict=True)):
+            block_angle = 2 * math.pi * cycles + 2 * self.overshoot_rad
+            block_s = block_angle * self.radius_m / speed
+            for run in range(self.runs):
+                for direction in self.order:
+                    sign = 1 if direction == "ccw" else -1
+                    plans.append(
+                        BlockPlan(
+                            index=len(plans),
+                            run=run,
+                            direction=direction,
+                            sign=sign,
+                            start_angle_rad=angle,
+                            t_start_s=t,
+                            t_end_s=t + block_s,
+                            analysed_start_rad=angle + sign * self.overshoot_rad,
+                            feed=feed,
+                        )
                     )
-                )
-                angle += sign * self.block_angle_rad
-                t += self.block_duration_s + self.dwell_s
+                    angle += sign * block_angle
+                    t += block_s + self.dwell_s
         return plans
 
     def nominal_angle(self, block, t_s):
@@ -211,7 +337,8 @@ class TestProgram:
         float or ndarray
             Position angle. [rad]
         """
-        return block.start_angle_rad + block.sign * self.omega_rad_s * (t_s - block.t_start_s)
+        omega = self.feeds[block.feed] / self.radius_m
+        return block.start_angle_rad + block.sign * omega * (t_s - block.t_start_s)
 
     def nominal_time(self, block, phi_rad):
         """Time at which ``block`` passes position angle ``phi_rad``, at constant feed.
@@ -228,15 +355,20 @@ class TestProgram:
         float or ndarray
             Time from the start of the first block. [s]
         """
-        return block.t_start_s + block.sign * (phi_rad - block.start_angle_rad) / self.omega_rad_s
+        omega = self.feeds[block.feed] / self.radius_m
+        return block.t_start_s + block.sign * (phi_rad - block.start_angle_rad) / omega
 
     def to_mapping(self):
         """The program as a ``[program]`` table in file units (mm, mm/min, degrees)."""
+        if self.n_feeds > 1:
+            feed = {"feeds_mm_per_min": [v * 6e4 for v in self.feeds]}
+        else:
+            feed = {"feed_mm_per_min": self.feed_m_per_s * 6e4}
         return {
             "plane": self.plane,
             "radius_mm": self.radius_m * 1e3,
-            "feed_mm_per_min": self.feed_m_per_s * 6e4,
-            "cycles_per_direction": self.cycles_per_direction,
+            **feed,
+            "cycles_per_direction": list(self.cycles_per_feed) or self.cycles_per_direction,
             "overshoot_deg": math.degrees(self.overshoot_rad),
             "start_angle_deg": math.degrees(self.start_angle_rad),
             "order": list(self.order),
@@ -273,6 +405,7 @@ _FIELDS = {
     "plane": str,
     "radius_mm": float,
     "feed_mm_per_min": float,
+    "feeds_mm_per_min": list,
     "cycles_per_direction": int,
     "overshoot_deg": float,
     "start_angle_deg": float,
@@ -281,7 +414,7 @@ _FIELDS = {
     "runs": int,
     "centre_mm": list,
 }
-_REQUIRED = ("radius_mm", "feed_mm_per_min", "cycles_per_direction")
+_REQUIRED = ("radius_mm", "cycles_per_direction")
 
 
 def _number(source, key, value, kind):
@@ -295,6 +428,57 @@ def _number(source, key, value, kind):
     if not math.isfinite(value):
         raise ProgramError(f"{source}: [program] {key} must be finite, got {value!r}")
     return value
+
+
+def _feed(source, key, value):
+    feed = _number(source, key, value, float)
+    if not 0 < feed <= MAX_FEED_M_PER_S * 6e4:
+        raise ProgramError(
+            f"{source}: [program] {key} must be in (0, {MAX_FEED_M_PER_S * 6e4:g}], got {feed!r}"
+        )
+    return feed
+
+
+def _feeds(source, table):
+    """The feeds in mm/min: ``[feed_mm_per_min]`` or the checked ``feeds_mm_per_min``."""
+    if "feed_mm_per_min" in table:
+        return [_feed(source, "feed_mm_per_min", table["feed_mm_per_min"])]
+    feeds = table["feeds_mm_per_min"]
+    if not isinstance(feeds, list) or not 1 <= len(feeds) <= MAX_FEEDS:
+        raise ProgramError(
+            f"{source}: [program] feeds_mm_per_min must be a list of 1 to {MAX_FEEDS} feeds "
+            f"in mm/min, got {feeds!r}"
+        )
+    feeds = [_feed(source, "feeds_mm_per_min", f) for f in feeds]
+    ordered = sorted(feeds)
+    for slow, fast in itertools.pairwise(ordered):
+        if fast < MIN_FEED_RATIO * slow:
+            raise ProgramError(
+                f"{source}: [program] feeds_mm_per_min must differ from each other by at least "
+                f"{MIN_FEED_RATIO - 1:.0%} (v^2/r by {MIN_FEED_RATIO**2 - 1:.0%}) to separate "
+                f"what scales with the feed from what does not, got {feeds!r}"
+            )
+    return feeds
+
+
+def _cycles(source, value, n_feeds):
+    """Cycles per direction at each feed, from one count or a list of one per feed."""
+    if isinstance(value, list):
+        if len(value) != n_feeds:
+            raise ProgramError(
+                f"{source}: [program] cycles_per_direction must be one whole number, or a list "
+                f"of one per feed ({n_feeds}), got {value!r}"
+            )
+        counts = [_number(source, "cycles_per_direction", c, int) for c in value]
+    else:
+        counts = [_number(source, "cycles_per_direction", value, int)] * n_feeds
+    for cycles in counts:
+        if not 2 <= cycles <= 1000:
+            raise ProgramError(
+                f"{source}: [program] cycles_per_direction must be a whole number in [2, 1000], "
+                f"got {cycles!r}"
+            )
+    return counts
 
 
 def program_from_mapping(table, source="<program>"):
@@ -326,6 +510,12 @@ def program_from_mapping(table, source="<program>"):
     for key in _REQUIRED:
         if key not in table:
             raise ProgramError(f"{source}: [program] is missing the required field {key!r}")
+    if ("feed_mm_per_min" in table) == ("feeds_mm_per_min" in table):
+        raise ProgramError(
+            f"{source}: [program] needs exactly one of 'feed_mm_per_min' (one feed) and "
+            f"'feeds_mm_per_min' (a list of feeds), got "
+            f"{'both' if 'feed_mm_per_min' in table else 'neither'}"
+        )
     d = TestProgram()
     get = table.get
 
@@ -338,18 +528,8 @@ def program_from_mapping(table, source="<program>"):
             f"{source}: [program] radius_mm must be in (0, {MAX_RADIUS_M * 1e3:g}], "
             f"got {radius_mm!r}"
         )
-    feed = _number(source, "feed_mm_per_min", get("feed_mm_per_min"), float)
-    if not 0 < feed <= MAX_FEED_M_PER_S * 6e4:
-        raise ProgramError(
-            f"{source}: [program] feed_mm_per_min must be in (0, {MAX_FEED_M_PER_S * 6e4:g}], "
-            f"got {feed!r}"
-        )
-    cycles = _number(source, "cycles_per_direction", get("cycles_per_direction"), int)
-    if not 2 <= cycles <= 1000:
-        raise ProgramError(
-            f"{source}: [program] cycles_per_direction must be a whole number in [2, 1000], "
-            f"got {cycles!r}"
-        )
+    feeds = _feeds(source, table)
+    cycles = _cycles(source, get("cycles_per_direction"), len(feeds))
     overshoot = _number(source, "overshoot_deg", get("overshoot_deg", 180.0), float)
     if not 0 <= overshoot <= 360:
         raise ProgramError(
@@ -370,6 +550,11 @@ def program_from_mapping(table, source="<program>"):
     dwell = _number(source, "dwell_s", get("dwell_s", d.dwell_s), float)
     if not 0 <= dwell <= 600:
         raise ProgramError(f"{source}: [program] dwell_s must be in [0, 600], got {dwell!r}")
+    if len(feeds) > 1 and dwell < MIN_FEEDS_DWELL_S:
+        raise ProgramError(
+            f"{source}: [program] dwell_s must be at least {MIN_FEEDS_DWELL_S:g} s with several "
+            f"feeds (the table rests between the feeds so that they are told apart), got {dwell!r}"
+        )
     runs = _number(source, "runs", get("runs", d.runs), int)
     if not 1 <= runs <= 1000:
         raise ProgramError(f"{source}: [program] runs must be in [1, 1000], got {runs!r}")
@@ -379,19 +564,22 @@ def program_from_mapping(table, source="<program>"):
     centre = [_number(source, "centre_mm", c, float) for c in centre]
 
     radius_m = radius_mm * 1e-3
-    feed_m_per_s = feed / 6e4
-    centripetal = feed_m_per_s**2 / radius_m
-    if not MIN_CENTRIPETAL_M_S2 <= centripetal <= MAX_CENTRIPETAL_M_S2:
-        raise ProgramError(
-            f"{source}: [program] feed_mm_per_min={feed:g} with radius_mm={radius_mm:g} gives a "
-            f"centripetal acceleration of {centripetal:.3g} m/s^2; a machine-tool circle test "
-            f"needs {MIN_CENTRIPETAL_M_S2:g} to {MAX_CENTRIPETAL_M_S2:g} m/s^2"
-        )
+    key = "feed_mm_per_min" if "feed_mm_per_min" in table else "feeds_mm_per_min"
+    for feed in feeds:
+        centripetal = (feed / 6e4) ** 2 / radius_m
+        if not MIN_CENTRIPETAL_M_S2 <= centripetal <= MAX_CENTRIPETAL_M_S2:
+            raise ProgramError(
+                f"{source}: [program] {key}={feed:g} with radius_mm={radius_mm:g} gives a "
+                f"centripetal acceleration of {centripetal:.3g} m/s^2; a machine-tool circle "
+                f"test needs {MIN_CENTRIPETAL_M_S2:g} to {MAX_CENTRIPETAL_M_S2:g} m/s^2"
+            )
     return TestProgram(
         plane=plane,
         radius_m=radius_m,
-        feed_m_per_s=feed_m_per_s,
-        cycles_per_direction=cycles,
+        feed_m_per_s=feeds[0] / 6e4,
+        cycles_per_direction=cycles[0],
+        feeds_m_per_s=tuple(f / 6e4 for f in feeds) if len(feeds) > 1 else (),
+        cycles_per_feed=tuple(cycles) if len(feeds) > 1 else (),
         overshoot_rad=math.radians(overshoot),
         start_angle_rad=math.radians(start),
         order=tuple(order),

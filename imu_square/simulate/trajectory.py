@@ -304,6 +304,27 @@ class Timeline:
         return [b.analysed_window_s for b in self.blocks]
 
 
+def _check_ramp(program, ramp_s, name_feed):
+    """Refuse a ramp longer than a block, warn when it reaches into the analysed cycles."""
+    at = f" at {program.feed_m_per_s * 6e4:g} mm/min" if name_feed else ""
+    block_s = program.block_duration_s
+    if ramp_s > block_s:
+        raise ConfigError(
+            f"[machine] ramp_s = {ramp_s!r} s is longer than the block duration "
+            f"{block_s:.6g} s{at} (block angle / angular speed): the start and end feed "
+            "ramps would overlap; shorten ramp_s or lower the feed"
+        )
+    ramp_angle = 0.5 * program.omega_rad_s * ramp_s
+    if ramp_angle > program.overshoot_rad:
+        warnings.warn(
+            f"[machine] ramp_s = {ramp_s!r} s covers {math.degrees(ramp_angle):.4g} deg "
+            f"of arc{at}, more than the overshoot of {math.degrees(program.overshoot_rad):.4g} "
+            "deg: the feed ramps reach into the analysed cycles",
+            ImuSquareWarning,
+            stacklevel=3,
+        )
+
+
 def build_timeline(program, ramp_s, profile, lead_in_s, lead_out_s):
     """Place the program's blocks on the true time axis.
 
@@ -325,8 +346,8 @@ def build_timeline(program, ramp_s, profile, lead_in_s, lead_out_s):
     Raises
     ------
     ConfigError
-        If ``ramp_s`` exceeds the block's nominal duration (the two ramps of a
-        block would overlap).
+        If ``ramp_s`` exceeds a block's nominal duration (the two ramps of a
+        block would overlap), at any of the program's feeds.
 
     Warns
     -----
@@ -334,33 +355,21 @@ def build_timeline(program, ramp_s, profile, lead_in_s, lead_out_s):
         If a ramp covers more than the overshoot, so it reaches into the
         analysed whole cycles.
     """
-    block_s = program.block_duration_s
-    if ramp_s > block_s:
-        raise ConfigError(
-            f"[machine] ramp_s = {ramp_s!r} s is longer than the block duration "
-            f"{block_s:.6g} s (block angle / angular speed): the start and end feed "
-            "ramps would overlap; shorten ramp_s or lower the feed"
-        )
-    ramp_angle = 0.5 * program.omega_rad_s * ramp_s
-    if ramp_angle > program.overshoot_rad:
-        warnings.warn(
-            f"[machine] ramp_s = {ramp_s!r} s covers {math.degrees(ramp_angle):.4g} deg "
-            f"of arc, more than the overshoot of {math.degrees(program.overshoot_rad):.4g} deg: "
-            "the feed ramps reach into the analysed cycles",
-            ImuSquareWarning,
-            stacklevel=2,
-        )
+    feeds = [program.at_feed(f) for f in range(program.n_feeds)]
+    for feed in feeds:
+        _check_ramp(feed, ramp_s, program.n_feeds > 1)
     blocks = []
     t = lead_in_s
     for plan in program.blocks():
+        feed = feeds[plan.feed]
         b = BlockMotion(
             index=plan.index,
             direction=plan.direction,
             sign=plan.sign,
             start_angle_rad=plan.start_angle_rad,
-            angle_rad=program.block_angle_rad,
+            angle_rad=feed.block_angle_rad,
             overshoot_rad=program.overshoot_rad,
-            omega_rad_s=program.omega_rad_s,
+            omega_rad_s=feed.omega_rad_s,
             ramp_s=ramp_s,
             profile=profile,
             t_start_s=t,

@@ -28,6 +28,15 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
 - ``servo_mismatch_rad = omega (tau_y - tau_x)``;
 - ``gravity_phase_rad``: the apparent ``theta_y - theta_x`` that gravity
   coupling adds (position-angle domain, the same in both directions);
+- ``expected_squareness_gravity_free_rad``: ``expected_squareness_rad``
+  without the gravity coupling, what a fit over two feeds reads
+  (``analyze --separate-gravity``); ``gravity_coupling_rad_per_m``: the
+  coupling that shows in ``theta_y - theta_x``
+  (:func:`gravity_coupling_rad_per_m`);
+- ``feeds``: per feed, in the program's order, ``feed_mm_per_min``,
+  ``omega_rad_s``, ``amplitude_m_s2``, ``servo_mismatch_rad``,
+  ``gravity_phase_rad`` and ``expected_squareness_rad``; the top-level keys
+  of the same names are the first feed's;
 - ``omega_rad_s``, ``amplitude_m_s2 = v^2/r``, ``sample_rate_hz``,
   ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``;
 - ``effects``: the named effects that are on, with their parameters (SI);
@@ -36,8 +45,8 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
 - ``blocks``: per block ``index``, ``direction``, the start and end of the
   commanded motion (each actual axis follows its servo lag ``tau`` later)
   as ``start_ns`` / ``end_ns`` (recording clock) and ``start_s`` / ``end_s``
-  from the first sample, and ``analysed_start_s`` / ``analysed_end_s`` (the whole cycles
-  between the overshoots);
+  from the first sample, ``analysed_start_s`` / ``analysed_end_s`` (the whole cycles
+  between the overshoots), and ``feed``, the index of the block's feed;
 - ``reversal_times_s``: ``{"x": [...], "y": [...]}``, when each actual axis
   reverses (servo lag included), from the first sample;
 - the keys of :data:`LEGACY_KEYS`, written until the next release under their
@@ -45,6 +54,7 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
 """
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -91,6 +101,46 @@ def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics):
     return math.remainder(diff, 2 * math.pi)  # both phases can straddle +-pi
 
 
+def gravity_coupling_rad_per_m(machine, eps_rad):
+    """The gravity coupling that shows in ``theta_y - theta_x``, per metre of radius.
+
+    To first order, gravity coupling ``K`` (``machine.tilt_per_m``) seen through
+    a sensor turned by ``eps`` adds ``(g r / A) kappa`` to ``theta_y - theta_x``
+    with ``kappa = cos(2 eps) (k_xy + k_yx) + sin(2 eps) (k_yy - k_xx)``: the
+    symmetric shear of the tilt gradient in the sensor's axes, as a squareness
+    shows as ``alpha cos(2 eps)``.
+
+    Parameters
+    ----------
+    machine : MachineModel
+        The machine (its ``tilt_per_m``).
+    eps_rad : float
+        Rotation of the sensor's axes from the machine's (mounting plus
+        carriage yaw). [rad]
+
+    Returns
+    -------
+    float
+        ``kappa``. [rad/m]
+    """
+    kxx, kxy, kyx, kyy = machine.tilt_per_m
+    return math.cos(2 * eps_rad) * (kxy + kyx) + math.sin(2 * eps_rad) * (kyy - kxx)
+
+
+def _feed_truth(program, machine, beta_t, eps, harmonics):
+    """The quantities that depend on the feed, for a one-feed program."""
+    theta_gx, theta_gy = _gravity_phases(program, machine)
+    return {
+        "feed_mm_per_min": program.feed_m_per_s * 6e4,
+        "omega_rad_s": program.omega_rad_s,
+        "amplitude_m_s2": program.centripetal_m_s2,
+        "servo_mismatch_rad": program.omega_rad_s * (machine.tau_y_s - machine.tau_x_s),
+        "gravity_phase_rad": theta_gy - theta_gx,
+        "expected_squareness_rad": _exact_theta_diff(program, machine, beta_t, eps, harmonics)
+        + 0.0,
+    }
+
+
 def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s=0.0):
     """The truth dictionary of one run.
 
@@ -129,10 +179,9 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         / float(np.sum(durations))
     )
     cx, cy = program.centre_m
-    omega = program.omega_rad_s
-    theta_gx, theta_gy = _gravity_phases(program, machine)
     blocks = []
-    for b, (a0, a1) in zip(timeline.blocks, windows, strict=True):
+    plans = program.blocks()
+    for b, (a0, a1), plan in zip(timeline.blocks, windows, plans, strict=True):
         start, end = b.t_start_s * clock_factor, b.t_end_s * clock_factor
         blocks.append(
             {
@@ -144,6 +193,7 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
                 "end_s": end,
                 "analysed_start_s": a0 * clock_factor,
                 "analysed_end_s": a1 * clock_factor,
+                "feed": plan.feed,
             }
         )
     effects = {**machine.effects(), **sensor.effects()}
@@ -154,11 +204,18 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
     local = float(geometry.local_machine_squareness(cx, cy, t_mean)) + 0.0
     circle = float(geometry.circle_squareness(cx, cy, program.radius_m, t_mean)) + 0.0
     yaw = float(geometry.carriage_yaw(cx, cy))
+    eps = sensor.eps_c_rad + yaw
     harmonics = circle - local
-    expected = _exact_theta_diff(
-        program, machine, (beta, t_mean), sensor.eps_c_rad + yaw, harmonics
+    feeds = [
+        _feed_truth(program.at_feed(f), machine, (beta, t_mean), eps, harmonics)
+        for f in range(program.n_feeds)
+    ]
+    first = feeds[0]
+    expected = first["expected_squareness_rad"]
+    level = replace(machine, tilt_per_m=(0.0, 0.0, 0.0, 0.0))
+    gravity_free = (
+        _exact_theta_diff(program.at_feed(0), level, (beta, t_mean), eps, harmonics) + 0.0
     )
-    expected += 0.0
     return {
         "machine_squareness_rad": alpha,
         "sensor_squareness_rad": beta,
@@ -167,10 +224,13 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         "expected_squareness_rad": expected,
         "eps_c_rad": sensor.eps_c_rad,
         "carriage_yaw_rad": yaw,
-        "servo_mismatch_rad": omega * (machine.tau_y_s - machine.tau_x_s),
-        "gravity_phase_rad": theta_gy - theta_gx,
-        "omega_rad_s": omega,
-        "amplitude_m_s2": program.centripetal_m_s2,
+        "expected_squareness_gravity_free_rad": gravity_free,
+        "gravity_coupling_rad_per_m": gravity_coupling_rad_per_m(machine, eps),
+        "servo_mismatch_rad": first["servo_mismatch_rad"],
+        "gravity_phase_rad": first["gravity_phase_rad"],
+        "omega_rad_s": first["omega_rad_s"],
+        "amplitude_m_s2": first["amplitude_m_s2"],
+        "feeds": feeds,
         "sample_rate_hz": sensor.sample_rate_hz,
         "clock_ppm": sensor.clock_ppm,
         "noise_density_m_s2_rthz": sensor.noise_density_m_s2_rthz,
@@ -187,5 +247,5 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         "beta_rad": beta,
         "local_squareness_rad": local,
         "expected_theta_diff_exact_rad": expected,
-        "expected_theta_diff_rad": circle + beta + theta_gy - theta_gx,
+        "expected_theta_diff_rad": circle + beta + first["gravity_phase_rad"],
     }

@@ -1,0 +1,164 @@
+"""``imu-square plan``: the circle test that detects the smallest change in the time given."""
+
+import json
+import math
+import sys
+from pathlib import Path
+
+
+def register(sub):
+    """Add the ``plan`` subcommand."""
+    p = sub.add_parser(
+        "plan",
+        help="plan a circle test: radius, feed(s), cycles and dwell for a sensor and a machine",
+        description="Choose the circle test that detects the smallest change of squareness in "
+        "the time given, within the machine's and the sensor's limits; predict the standard "
+        "deviation of one run and of the change against a baseline, the smallest change "
+        "detected at the confidence asked, and the time on the machine. The prediction is the "
+        "Cramér-Rao bound at the sensor's noise at the circle frequency (white, 1/f and ADC "
+        "steps) over the estimator's measured efficiency, plus the servo amplitude leak as a "
+        "bias bound. -o writes the program file.",
+    )
+    s = p.add_argument_group("sensor (or --sensor FILE; a flag overrides the file)")
+    s.add_argument("--sensor", metavar="SENSOR.toml", help="sensor file, as simulate takes")
+    s.add_argument(
+        "--noise-density-ug",
+        "--noise-ug",
+        dest="noise_density_ug",
+        type=float,
+        help="white-noise density per axis [ug/sqrt(Hz)]",
+    )
+    s.add_argument("--flicker-corner-hz", type=float, help="1/f noise corner [Hz] (default 0)")
+    s.add_argument("--range-g", type=float, help="full scale [g] (default 2.048)")
+    s.add_argument("--sample-rate-hz", type=float, help="sample rate [Hz] (default 1000)")
+    s.add_argument("--resolution-ug", type=float, help="ADC step [ug] (default 0)")
+    m = p.add_argument_group("machine")
+    m.add_argument("--max-feed-mm-min", type=float, required=True, help="fastest feed [mm/min]")
+    m.add_argument(
+        "--max-accel-m-s2",
+        type=float,
+        required=True,
+        help="largest centripetal acceleration v^2/r for a stable circle [m/s^2]",
+    )
+    m.add_argument(
+        "--travel-mm",
+        type=float,
+        required=True,
+        help="shortest of the X and Y travels free around the centre: the circle's diameter [mm]",
+    )
+    m.add_argument(
+        "--servo-lags-ms",
+        type=float,
+        nargs=2,
+        default=[2.0, 2.5],
+        metavar=("TX", "TY"),
+        help="axes' following lags, for the servo amplitude leak bound [ms] (default 2.0 2.5)",
+    )
+    m.add_argument(
+        "--eps-c-deg",
+        type=float,
+        help="largest rotation of the sensor on the table [deg] (default: the sensor file's, "
+        "else 2)",
+    )
+    m.add_argument(
+        "--ramp-s", type=float, default=0.15, help="feed ramp at each block end [s] (0.15)"
+    )
+    g = p.add_argument_group("test")
+    g.add_argument("--time-s", type=float, required=True, help="time available [s]")
+    g.add_argument("--detect-um-m", type=float, help="change of squareness to detect [µm/m]")
+    g.add_argument(
+        "--confidence", type=float, default=0.95, help="confidence of the detection (0.95)"
+    )
+    g.add_argument(
+        "--baseline-runs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="runs averaged into the baseline the change is taken against (1)",
+    )
+    g.add_argument(
+        "--stable-servo",
+        action="store_true",
+        help="the servo tuning and the sensor mount stay as for the baseline: the servo leak "
+        "cancels in the change and is not added to the detectable change",
+    )
+    g.add_argument(
+        "--separate-gravity",
+        action="store_true",
+        help="plan two feeds of one circle, for analyze --separate-gravity",
+    )
+    p.add_argument("-o", "--output", metavar="PLAN.toml", help="write the program file")
+    p.add_argument("--json", action="store_true", help="the plan as one JSON object on stdout")
+    p.set_defaults(func=run)
+
+
+def _sensor(args):
+    from imu_square.errors import ConfigError
+    from imu_square.planner import SensorSpec
+    from imu_square.simulate import read_sensor
+    from imu_square.units import UG, G
+
+    eps = None
+    if args.sensor:
+        model = read_sensor(args.sensor)
+        noise = model.noise_density_m_s2_rthz
+        corner, full, rate = model.flicker_corner_hz, model.range_m_s2, model.sample_rate_hz
+        step = model.resolution_m_s2
+        eps = abs(model.eps_c_rad)
+    else:
+        noise, corner, full, rate, step = None, 0.0, 2.048 * G, 1000.0, 0.0
+    if args.noise_density_ug is not None:
+        noise = args.noise_density_ug * UG
+    if noise is None or noise <= 0:
+        raise ConfigError(
+            "plan: the sensor's noise is needed: give --noise-density-ug (ug/sqrt(Hz)) or a "
+            f"--sensor file with noise_density_ug_rthz > 0, got {noise!r}"
+        )
+    if args.flicker_corner_hz is not None:
+        corner = args.flicker_corner_hz
+    if args.range_g is not None:
+        full = args.range_g * G
+    if args.sample_rate_hz is not None:
+        rate = args.sample_rate_hz
+    if args.resolution_ug is not None:
+        step = args.resolution_ug * UG
+    return SensorSpec(noise, corner, full, rate, step), eps
+
+
+def run(args):
+    """Plan, print the plan, write the program file and the JSON."""
+    from imu_square.errors import ProgramError
+    from imu_square.planner import Goal, Limits, plan_test
+    from imu_square.units import MM, MM_PER_MIN, MS, URAD
+
+    sensor, sensor_eps = _sensor(args)
+    eps_deg = args.eps_c_deg
+    eps = math.radians(eps_deg) if eps_deg is not None else sensor_eps
+    limits = Limits(
+        max_feed_m_s=args.max_feed_mm_min * MM_PER_MIN,
+        max_accel_m_s2=args.max_accel_m_s2,
+        travel_m=args.travel_mm * MM,
+        time_s=args.time_s,
+        servo_lags_s=tuple(t * MS for t in args.servo_lags_ms),
+        eps_c_rad=math.radians(2.0) if eps is None else eps,
+        ramp_s=args.ramp_s,
+    )
+    goal = Goal(
+        change_rad=None if args.detect_um_m is None else args.detect_um_m * URAD,
+        confidence=args.confidence,
+        baseline_runs=args.baseline_runs,
+        separate_gravity=args.separate_gravity,
+        stable_servo=args.stable_servo,
+    )
+    plan = plan_test(sensor, limits, goal)
+    print(plan.summary(), file=sys.stderr)
+    if args.output:
+        out = Path(args.output)
+        try:
+            out.write_text(plan.to_toml(), encoding="utf-8")
+        except OSError as exc:
+            raise ProgramError(f"{out}: cannot write the program file: {exc}") from None
+        print(f"wrote {out}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(plan.to_json_dict()), file=sys.stdout, flush=True)
+    return 0 if plan.detects is not False else 1

@@ -1,0 +1,252 @@
+"""The test planner: its noise model, its choices within the limits, its CLI, its prediction."""
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from imu_square.cli import main
+from imu_square.errors import ImuSquareError
+from imu_square.io.recording import SensorInfo
+from imu_square.pipeline.squareness import AnalysisOptions, analyze
+from imu_square.planner import (
+    ESTIMATOR_EFFICIENCY,
+    MIN_CYCLES,
+    Goal,
+    Limits,
+    PlanError,
+    SensorSpec,
+    evaluate,
+    plan_test,
+    servo_leak,
+    sigma_run,
+)
+from imu_square.program import TestProgram, read_program
+from imu_square.simulate import MachineModel, SensorModel, simulate_run
+from imu_square.simulate.noise import sensor_noise
+from imu_square.units import MM, MM_PER_MIN, UG, URAD, G
+
+PAPER = TestProgram()  # r = 100 mm, 6000 mm/min, 15 cycles each way
+D7 = 7.0 * UG
+
+
+def test_white_noise_gives_the_cramer_rao_bound_over_the_efficiency():
+    # docs/model.md: sqrt(2) d / (A sqrt(T)), T = 2 x 15 cycles of 2 pi s: about 70 urad
+    sensor = SensorSpec(D7)
+    bound = math.sqrt(2) * D7 / (0.1 * math.sqrt(30 * 2 * math.pi))
+    assert sigma_run(PAPER, sensor, 1.0) == pytest.approx(bound, rel=1e-12)
+    assert bound == pytest.approx(70e-6, rel=0.02)
+    assert sigma_run(PAPER, sensor) == pytest.approx(bound / math.sqrt(ESTIMATOR_EFFICIENCY))
+
+
+def test_flicker_noise_counts_at_the_circle_frequency():
+    # the paper's circle turns at 1/(2 pi) = 0.159 Hz: under a 0.5 Hz corner the PSD
+    # there is d^2 (1 + 0.5 / 0.159) = 4.14 d^2, the bound 2.03 x the white one
+    white = sigma_run(PAPER, SensorSpec(D7), 1.0)
+    pink = sigma_run(PAPER, SensorSpec(D7, flicker_corner_hz=0.5), 1.0)
+    assert pink / white == pytest.approx(math.sqrt(1 + 0.5 * 2 * math.pi), rel=1e-12)
+    # ADC steps of q add q^2 / (6 fs) to the PSD
+    stepped = SensorSpec(D7, resolution_m_s2=100 * UG, sample_rate_hz=1000.0)
+    assert stepped.psd(1.0) == pytest.approx(D7**2 + (100 * UG) ** 2 / 6000, rel=1e-12)
+
+
+def test_two_feeds_propagate_each_feed_through_its_weight():
+    program = TestProgram(radius_m=0.1, feeds_m_per_s=(0.1, 0.05), cycles_per_feed=(15, 8))
+    sensor = SensorSpec(D7)
+    s1 = sigma_run(program.at_feed(0), sensor)
+    s2 = sigma_run(program.at_feed(1), sensor)
+    # c = (A1, -A2) / (A1 - A2) = (4/3, -1/3)
+    assert sigma_run(program, sensor) == pytest.approx(math.hypot(4 / 3 * s1, s2 / 3), rel=1e-12)
+
+
+def test_servo_leak_is_the_issues_example():
+    # lags 1.5 and 2.1 ms at omega = 16 rad/s, eps_c = 1.15 deg: "about 10 urad";
+    # omega^2 (tau_y^2 - tau_x^2) / 2 sin(2 eps_c) = 11.1 urad
+    program = TestProgram(radius_m=0.025, feed_m_per_s=0.4)  # omega = 16 rad/s
+    limits = Limits(1.0, 10.0, 1.0, 600.0, (1.5e-3, 2.1e-3), math.radians(1.15))
+    leak = servo_leak(program, SensorSpec(D7), limits)
+    assert leak == pytest.approx(0.5 * 256 * (2.1e-3**2 - 1.5e-3**2) * math.sin(math.radians(2.3)))
+    assert leak == pytest.approx(11.1 * URAD, abs=0.05 * URAD)
+
+
+SENSOR25 = SensorSpec(25 * UG, 0.1, 2.048 * G, 1000.0, 3.9 * UG)
+LIMITS = Limits(20000 * MM_PER_MIN, 5.0, 0.5, 300.0)
+
+
+@pytest.mark.parametrize("separate", [False, True])
+@pytest.mark.parametrize(
+    "limits",
+    [
+        LIMITS,
+        Limits(6000 * MM_PER_MIN, 0.1, 0.2, 600.0),
+        Limits(15000 * MM_PER_MIN, 2.0, 0.08, 90.0),
+    ],
+)
+def test_the_plan_keeps_within_the_limits(limits, separate):
+    goal = Goal(10 * URAD, 0.95, 5, separate_gravity=separate)
+    plan = plan_test(SENSOR25, limits, goal)
+    p = plan.program
+    assert p.n_feeds == (2 if separate else 1)
+    for f in range(p.n_feeds):
+        one = p.at_feed(f)
+        assert one.feed_m_per_s <= limits.max_feed_m_s * (1 + 1e-12)
+        assert one.centripetal_m_s2 <= limits.max_accel_m_s2 * (1 + 1e-12)
+        assert one.cycles_per_direction >= MIN_CYCLES
+        # the blocks rest longer than a tenth of the period, which the segmentation needs
+        assert p.dwell_s >= 0.1 * one.period_s
+    assert 2 * p.radius_m <= limits.travel_m
+    assert plan.duration_s <= limits.time_s
+    # a plan is a valid program file
+    from imu_square.program import parse_program
+
+    assert parse_program(plan.to_toml()) == p
+    # the detectable change: z sigma_change + the leak, z = 1.96 at 95 %
+    assert plan.z == pytest.approx(1.959964, rel=1e-6)
+    assert plan.sigma_change_rad == pytest.approx(plan.sigma_run_rad * math.sqrt(1.2))
+    assert plan.detectable_change_rad == pytest.approx(
+        plan.z * plan.sigma_change_rad + plan.servo_leak_rad
+    )
+
+
+def test_more_time_resolves_more_and_the_leak_pushes_to_large_circles():
+    short = plan_test(SENSOR25, replace(LIMITS, time_s=100.0), Goal(stable_servo=True))
+    long = plan_test(SENSOR25, replace(LIMITS, time_s=400.0), Goal(stable_servo=True))
+    # sigma ~ 1/sqrt(T), up to the overheads of a block (overshoots, ramps, dwells)
+    assert long.sigma_run_rad / short.sigma_run_rad == pytest.approx(0.5, rel=0.1)
+    counted = plan_test(SENSOR25, LIMITS, Goal())
+    kept = plan_test(SENSOR25, LIMITS, Goal(stable_servo=True))
+    # counting the leak (omega^2 = A / r) moves the plan to a larger, slower circle
+    assert counted.program.radius_m > kept.program.radius_m
+    assert counted.program.omega_rad_s < kept.program.omega_rad_s
+    assert kept.detectable_change_rad == pytest.approx(kept.z * kept.sigma_change_rad)
+
+
+def test_time_to_detect_scales_the_cycles():
+    plan = plan_test(SENSOR25, LIMITS, Goal(3 * URAD, 0.95, 5, stable_servo=True))
+    assert not plan.detects
+    # (z sigma_change / target)^2 as many cycles: about (8.9 / 3)^2 = 9 x the time
+    ratio = (plan.z * plan.sigma_change_rad / (3 * URAD)) ** 2
+    assert plan.time_to_detect_s == pytest.approx(ratio * plan.duration_s, rel=0.02)
+
+
+@pytest.mark.parametrize(
+    ("sensor", "limits", "goal", "match"),
+    [
+        (SENSOR25, replace(LIMITS, time_s=2.0), Goal(), r"no circle test fits: at least 5 cycles"),
+        (SENSOR25, replace(LIMITS, travel_m=0.005), Goal(), r"no circle test fits"),
+        (replace(SENSOR25, noise_density_m_s2_rthz=-1.0), LIMITS, Goal(), r"noise density .*-1\.0"),
+        (SENSOR25, LIMITS, Goal(confidence=1.5), r"confidence must be in \(0, 1\], got 1\.5"),
+        (SENSOR25, LIMITS, Goal(baseline_runs=0), r"baseline runs must be in \(0, 1e\+06\]"),
+        (SENSOR25, replace(LIMITS, max_accel_m_s2=0.0), Goal(), r"max centripetal .*got 0\.0"),
+    ],
+)
+def test_refusals_name_the_parameter(sensor, limits, goal, match):
+    with pytest.raises(PlanError, match=match):
+        plan_test(sensor, limits, goal)
+    assert issubclass(PlanError, ImuSquareError)
+
+
+def test_cli_writes_a_program_the_other_commands_take(tmp_path, capsys):
+    out = tmp_path / "plan.toml"
+    argv = [
+        "plan",
+        "--noise-ug",
+        "25",
+        "--max-feed-mm-min",
+        "20000",
+        "--max-accel-m-s2",
+        "5",
+        "--travel-mm",
+        "500",
+        "--time-s",
+        "300",
+        "--detect-um-m",
+        "10",
+        "--baseline-runs",
+        "5",
+        "--stable-servo",
+        "--json",
+        "-o",
+        str(out),
+    ]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    for key in ("sigma_run_urad", "sigma_change_urad", "detectable_change_urad", "duration_s"):
+        assert doc[key] > 0
+    assert doc["detects_target"] is True and doc["detectable_change_urad"] <= 10.0
+    assert doc["duration_s"] <= 300.0
+    program = read_program(out)
+    assert program.radius_m == pytest.approx(doc["radius_mm"] * MM)
+    assert doc["feeds_mm_per_min"] == [program.feed_m_per_s / MM_PER_MIN]
+    assert "plan: r = " in captured.err and f"wrote {out}" in captured.err
+    assert main(["program", str(out), "-o", str(tmp_path / "w.ngc")]) == 0
+    # the flags name their units; the old name of the noise flag is taken too
+    argv[1] = "--noise-density-ug"
+    assert main(argv[:-2]) == 0
+    assert json.loads(capsys.readouterr().out)["sigma_run_urad"] == doc["sigma_run_urad"]
+
+
+def test_cli_takes_the_sensor_file_and_says_when_the_target_is_missed(tmp_path, capsys):
+    from imu_square.simulate import data_path
+
+    argv = ["plan", "--sensor", str(data_path("sensor_paper.toml")), "--max-feed-mm-min", "6000"]
+    argv += ["--max-accel-m-s2", "0.1", "--travel-mm", "200", "--time-s", "400"]
+    assert main([*argv, "--detect-um-m", "10", "--json"]) == 1  # not detected: exit 1
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["detects_target"] is False
+    assert doc["noise_density_at_circle_ug_rthz"] == pytest.approx([7.0], rel=1e-3)
+    assert doc["time_to_detect_s"] > 400
+    assert main([*argv[:-1], "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error:" in err[0]
+
+
+@pytest.mark.slow
+def test_predicted_sigma_matches_simulated_runs():
+    """Monte Carlo subset of benchmarks/planner.py: one short plan, 30 runs.
+
+    The ratio of the runs' standard deviation to the prediction lies within the
+    chi-square interval of 29 degrees of freedom (two-sided 0.1 %), and their
+    mean within 1 urad plus 3.5 standard errors of the truth (servo lags on).
+    """
+    sensor = SensorSpec(25 * UG, 0.5, 2.048 * G, 500.0, 0.0)
+    plan = plan_test(sensor, Limits(12000 * MM_PER_MIN, 2.0, 0.1, 40.0), Goal(stable_servo=True))
+    program = plan.program
+    machine = MachineModel(tau_x_s=2e-3, tau_y_s=2.5e-3)
+    quiet = SensorModel(sample_rate_hz=500.0, eps_c_rad=math.radians(2.1), beta_rad=20e-6)
+    base, truth = simulate_run(program, machine, quiet, seed=0)
+    options = AnalysisOptions(cutoff_hz=plan.cutoff_hz, bootstrap_n=0)
+    n = 30
+    errors = []
+    for seed in range(n):
+        rng = np.random.default_rng(500 + seed)
+        noise = sensor_noise(base.n_samples, 500.0, sensor.noise_density_m_s2_rthz, 0.5, rng)
+        rec = replace(
+            base,
+            accel=base.accel + noise,
+            sensor=SensorInfo(noise_density_m_s2_rthz=sensor.noise_density_m_s2_rthz),
+        )
+        errors.append(analyze(rec, options).squareness_rad - truth["expected_squareness_rad"])
+    sd = float(np.std(errors, ddof=1))
+    lo = math.sqrt(stats.chi2.ppf(0.0005, n - 1) / (n - 1))
+    hi = math.sqrt(stats.chi2.ppf(0.9995, n - 1) / (n - 1))
+    assert lo < sd / plan.sigma_run_rad < hi
+    assert abs(np.mean(errors)) < 1 * URAD + 3.5 * sd / math.sqrt(n)
+
+
+def test_evaluate_says_what_a_given_program_resolves():
+    # the paper's test (2 x 15 cycles) with the paper's sensor: 70 urad / sqrt(e) per run;
+    # a 0.5 urad target is far out of reach: (z sigma_change / target)^2 times the cycles
+    limits = Limits(0.1, 0.1, 0.2, 400.0, (2e-3, 2e-3))
+    plan = evaluate(PAPER, SensorSpec(D7), limits, Goal(100 * URAD, 0.95, 4))
+    assert plan.servo_leak_rad == 0.0  # equal lags: no ellipse
+    assert plan.sigma_run_rad == pytest.approx(sigma_run(PAPER, SensorSpec(D7)), rel=1e-12)
+    assert plan.sigma_change_rad == pytest.approx(plan.sigma_run_rad * math.sqrt(1.25))
+    assert plan.detectable_change_rad == pytest.approx(1.959964 * plan.sigma_change_rad)
+    assert plan.detects is False
+    assert plan.analysed_s == pytest.approx(30 * 2 * math.pi, rel=1e-12)
+    assert plan.cutoff_hz == 4.0
