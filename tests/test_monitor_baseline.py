@@ -7,9 +7,9 @@ import pytest
 
 from imu_square.monitor.baseline import (
     MIN_RUNS,
-    BaselineError,
     REMOUNT_FLOOR_RAD,
     REMOUNT_SIGMAS,
+    BaselineError,
     RunValue,
     change_since,
     compute_baseline,
