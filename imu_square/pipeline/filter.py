@@ -13,8 +13,20 @@ the cutoff, and a roll-off of 40 dB/decade, twice that of ``H``. The
 ``order`` and ``cutoff_hz`` options name the designed filter, as in the paper
 and in SciPy.
 
-Samples lost in gaps are never interpolated across: each stretch of
-consecutive samples is filtered on its own.
+**Cutoff.** The paper's 4 Hz serves its 0.159 Hz circle (omega = 1 rad/s):
+8 pi times the circle frequency. The default cutoff keeps that ratio
+(:func:`circle_cutoff_hz`), so the filter settles in 4.4 % of a period and
+leaves tens of independent noise samples per cycle at any feed; a fixed 4 Hz
+at a 2.5 Hz circle settles in 0.27 s, longer than the 180 deg overshoot
+(0.2 s), and lets the start of motion leak into the first analysed cycle.
+
+**Gaps.** Samples lost in a *short* gap (at most :data:`MAX_BRIDGED_GAP_PERIODS`
+of a circle period) are bridged for the filter only: a least-squares fit of a
+line plus a sinusoid at the circle frequency to the samples either side
+predicts them, the whole stretch is filtered, and the bridged samples are
+marked invalid so that no later step uses them (``docs/model.md``, gaps). A
+longer gap breaks the data into stretches, each filtered on its own and
+never interpolated across.
 
 References
 ----------
@@ -30,6 +42,18 @@ import numpy as np
 from scipy import signal
 
 from imu_square.errors import AnalysisError
+
+# The paper's cutoff over its circle frequency: 4 Hz / (1 / 2 pi) Hz.
+CUTOFF_PER_CIRCLE_FREQUENCY = 8 * np.pi
+# The cutoff tied to the circle stays below this fraction of the sample rate.
+MAX_CUTOFF_OF_SAMPLE_RATE = 0.2
+# Gaps up to this fraction of a circle period (45 deg of arc) are bridged.
+MAX_BRIDGED_GAP_PERIODS = 0.125
+# Samples either side of a bridged gap used to predict it, in circle periods (and
+# at least twice the gap).
+BRIDGE_WINDOW_PERIODS = 0.25
+# Least real samples on each side of a gap to bridge it.
+_MIN_BRIDGE_SAMPLES = 8
 
 
 def design_lowpass(cutoff_hz, order, sample_rate_hz):
@@ -93,8 +117,32 @@ def lowpass(data, cutoff_hz, order, sample_rate_hz, breaks=()):
     return out
 
 
-def settling_time_s(cutoff_hz, order):
-    """Time after which the forward-backward impulse response has decayed below 1e-3.
+def circle_cutoff_hz(circle_frequency_hz, sample_rate_hz):
+    """The default cutoff: the paper's ratio to the circle frequency.
+
+    Parameters
+    ----------
+    circle_frequency_hz : float
+        Frequency of the circle. [Hz]
+    sample_rate_hz : float
+        Sample rate. [Hz]
+
+    Returns
+    -------
+    float
+        ``8 pi`` times the circle frequency (4 Hz for the paper's 0.159 Hz
+        circle), at most :data:`MAX_CUTOFF_OF_SAMPLE_RATE` of the sample rate. [Hz]
+    """
+    return float(
+        min(
+            CUTOFF_PER_CIRCLE_FREQUENCY * circle_frequency_hz,
+            MAX_CUTOFF_OF_SAMPLE_RATE * sample_rate_hz,
+        )
+    )
+
+
+def settling_time_s(cutoff_hz, order, level=1e-3):
+    """Time after which the forward-backward impulse response has decayed below ``level``.
 
     Parameters
     ----------
@@ -102,6 +150,8 @@ def settling_time_s(cutoff_hz, order):
         Cutoff of the designed filter. [Hz]
     order : int
         Order of the designed filter.
+    level : float
+        Fraction of the peak left.
 
     Returns
     -------
@@ -109,8 +159,8 @@ def settling_time_s(cutoff_hz, order):
         Half-width of the effective impulse response. [s]
     """
     # A Butterworth pole sits at radius 2 pi fc; its envelope exp(-2 pi fc sin(..) t)
-    # decays slowest for the pole nearest the axis. ln(1000) ~ 6.9 time constants.
-    return 6.9 / (2 * np.pi * cutoff_hz * np.sin(np.pi / (2 * order)))
+    # decays slowest for the pole nearest the axis: ln(1 / level) time constants.
+    return float(-np.log(level) / (2 * np.pi * cutoff_hz * np.sin(np.pi / (2 * order))))
 
 
 def passband_gain(frequency_hz, cutoff_hz, order, sample_rate_hz):
@@ -137,90 +187,182 @@ def passband_gain(frequency_hz, cutoff_hz, order, sample_rate_hz):
     return float(np.abs(h[0]) ** 2)
 
 
-def noise_bandwidth_hz(cutoff_hz, order, sample_rate_hz, highpass=False):
-    """Equivalent noise bandwidth of the forward-backward filter (or of its complement).
-
-    Parameters
-    ----------
-    cutoff_hz : float
-        Cutoff of the designed filter. [Hz]
-    order : int
-        Order of the designed filter.
-    sample_rate_hz : float
-        Sample rate. [Hz]
-    highpass : bool
-        If True, the bandwidth of ``1 - |H|^2`` (what the filter removes).
-
-    Returns
-    -------
-    float
-        Integral of the squared effective gain from 0 to Nyquist. [Hz]
-    """
-    sos = design_lowpass(cutoff_hz, order, sample_rate_hz)
-    f, h = signal.sosfreqz(sos, worN=1 << 16, fs=sample_rate_hz)
-    g = np.abs(h) ** 2
-    if highpass:
-        g = 1 - g
-    return float(np.trapezoid(g**2, f))
-
-
 @dataclass(frozen=True)
 class FilteredRecording:
     """A recording's samples as the later steps need them.
 
+    Short gaps are bridged (module docstring): their samples are present in
+    every array, with ``valid`` False.
+
     Attributes
     ----------
     t_s : ndarray, shape (n_samples,)
-        Sample times from the first sample. [s]
+        Sample times from the first sample, bridged samples included. [s]
     raw : ndarray, shape (n_samples, 3)
-        Unfiltered acceleration, float64. [m/s^2]
+        Unfiltered acceleration, float64; bridged samples hold the prediction. [m/s^2]
     xy : ndarray, shape (n_samples, 2)
         Zero-phase low-passed x and y. [m/s^2]
+    valid : ndarray of bool, shape (n_samples,)
+        False for bridged samples, which are no data.
     breaks : tuple of int
-        Indices of the first sample after each gap.
+        Indices of the first sample after each gap that is not bridged.
+    bridged_spans_s : tuple of tuple (float, float)
+        ``(last sample before, first sample after)`` of each bridged gap. [s]
     sample_rate_hz : float
         Nominal sample rate. [Hz]
+    cutoff_hz : float
+        Cutoff of the designed filter. [Hz]
+    order : int
+        Order of the designed filter.
     margin_s : float
-        Settling time of the filter, kept clear of gaps and block edges. [s]
+        Settling time of the filter to 1e-3, kept clear of gaps. [s]
     """
 
     t_s: np.ndarray
     raw: np.ndarray
     xy: np.ndarray
+    valid: np.ndarray
     breaks: tuple
+    bridged_spans_s: tuple
     sample_rate_hz: float
+    cutoff_hz: float
+    order: int
     margin_s: float
 
     @property
+    def onset_margin_s(self):
+        """Settling time to 1e-6, kept clear of the starts and stops of motion. [s]
+
+        There the data step from rest to the whole circle, and what is left of
+        the filter's response to that step must stay below the noise of the
+        averaged cycles (6.4 m/s^2 times 1e-3 was 200 times it).
+        """
+        return settling_time_s(self.cutoff_hz, self.order, 1e-6)
+
+    @property
     def gap_spans_s(self):
-        """``(last sample before, first sample after)`` of each gap. [s]"""
+        """``(last sample before, first sample after)`` of each gap not bridged. [s]"""
         return [(float(self.t_s[i - 1]), float(self.t_s[i])) for i in self.breaks]
 
+    @property
+    def all_gap_spans_s(self):
+        """Every gap, bridged or not, as ``(last sample before, first sample after)``. [s]"""
+        return sorted([*self.gap_spans_s, *self.bridged_spans_s])
 
-def filter_recording(recording, cutoff_hz, order):
-    """Low-pass a recording's horizontal axes, stretch by stretch between gaps.
+
+def _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window_s):
+    """Samples missing between ``i - 1`` and ``i``: line plus circle-frequency sinusoid."""
+    t_a, t_b = t_s[i - 1], t_s[i]
+    lo = int(np.searchsorted(t_s, t_a - window_s))
+    hi = int(np.searchsorted(t_s, t_b + window_s, side="right"))
+    if min(i - lo, hi - i) < _MIN_BRIDGE_SAMPLES:
+        return None  # too little data on one side (the recording's edge): not bridged
+    u = t_s[lo:hi] - 0.5 * (t_a + t_b)
+    w = 2 * np.pi * circle_frequency_hz
+    design = np.column_stack([np.ones_like(u), u, np.cos(w * u), np.sin(w * u)])
+    coef = np.linalg.lstsq(design, raw[lo:hi], rcond=None)[0]
+    v = t_fill - 0.5 * (t_a + t_b)
+    return np.column_stack([np.ones_like(v), v, np.cos(w * v), np.sin(w * v)]) @ coef
+
+
+def bridge_gaps(t_s, raw, gaps, circle_frequency_hz):
+    """Insert predicted samples into the short gaps of a recording.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n_samples,)
+        Sample times from the first sample. [s]
+    raw : ndarray, shape (n_samples, n_axes)
+        Samples. [m/s^2]
+    gaps : sequence of tuple (int, int)
+        ``(index, lost)`` of each gap, as :meth:`Recording.gaps` gives them.
+    circle_frequency_hz : float
+        Frequency of the circle, which decides what is short and shapes the
+        prediction. [Hz]
+
+    Returns
+    -------
+    t_s : ndarray, shape (n_bridged,)
+        Times with the bridged samples inserted. [s]
+    raw : ndarray, shape (n_bridged, n_axes)
+        Samples with the predictions inserted. [m/s^2]
+    valid : ndarray of bool, shape (n_bridged,)
+        False for inserted samples.
+    breaks : tuple of int
+        Index (in the new arrays) of the first sample after each gap not bridged.
+    bridged_spans_s : tuple of tuple (float, float)
+        ``(last sample before, first sample after)`` of each bridged gap. [s]
+    """
+    period = 1.0 / circle_frequency_hz
+    max_gap = MAX_BRIDGED_GAP_PERIODS * period
+    pieces_t, pieces_x, pieces_v = [], [], []
+    breaks, spans = [], []
+    start = 0
+    inserted = 0
+    for i, lost in gaps:
+        t_a, t_b = float(t_s[i - 1]), float(t_s[i])
+        pieces_t.append(t_s[start:i])
+        pieces_x.append(raw[start:i])
+        pieces_v.append(np.ones(i - start, dtype=bool))
+        start = i
+        t_fill = t_a + (t_b - t_a) * np.arange(1, lost + 1) / (lost + 1)
+        window = max(BRIDGE_WINDOW_PERIODS * period, 2 * (t_b - t_a))
+        fill = None
+        if 1 <= lost and t_b - t_a <= max_gap:
+            fill = _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window)
+        if fill is None:
+            breaks.append(i + inserted)
+            continue
+        pieces_t.append(t_fill)
+        pieces_x.append(fill)
+        pieces_v.append(np.zeros(lost, dtype=bool))
+        spans.append((t_a, t_b))
+        inserted += lost
+    pieces_t.append(t_s[start:])
+    pieces_x.append(raw[start:])
+    pieces_v.append(np.ones(t_s.size - start, dtype=bool))
+    return (
+        np.concatenate(pieces_t),
+        np.concatenate(pieces_x),
+        np.concatenate(pieces_v),
+        tuple(breaks),
+        tuple(spans),
+    )
+
+
+def filter_recording(recording, cutoff_hz, order, circle_frequency_hz):
+    """Bridge short gaps, then low-pass the horizontal axes stretch by stretch.
 
     Parameters
     ----------
     recording : Recording
         The test as recorded.
-    cutoff_hz : float
-        Cutoff of the designed filter. [Hz]
+    cutoff_hz : float or None
+        Cutoff of the designed filter; None for :func:`circle_cutoff_hz`. [Hz]
     order : int
         Order of the designed filter.
+    circle_frequency_hz : float
+        Programmed circle frequency. [Hz]
 
     Returns
     -------
     FilteredRecording
     """
     fs = recording.sample_rate_hz
-    raw = recording.accel.astype(np.float64)
-    breaks = tuple(i for i, _ in recording.gaps())
+    if cutoff_hz is None:
+        cutoff_hz = circle_cutoff_hz(circle_frequency_hz, fs)
+    t_s, raw, valid, breaks, spans = bridge_gaps(
+        recording.time_s, recording.accel.astype(np.float64), recording.gaps(), circle_frequency_hz
+    )
     return FilteredRecording(
-        t_s=recording.time_s,
+        t_s=t_s,
         raw=raw,
         xy=lowpass(raw[:, :2], cutoff_hz, order, fs, breaks),
+        valid=valid,
         breaks=breaks,
+        bridged_spans_s=spans,
         sample_rate_hz=fs,
+        cutoff_hz=float(cutoff_hz),
+        order=int(order),
         margin_s=settling_time_s(cutoff_hz, order),
     )

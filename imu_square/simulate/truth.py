@@ -23,7 +23,14 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   off exactly (``alpha`` shows as ``alpha cos(2 eps_c)``);
 - ``eps_c_rad``: sensor mounting rotation; ``carriage_yaw_rad``: the
   carriage's yaw at the circle centre (associated yaw), which adds to it;
-- ``servo_mismatch_rad = omega (tau_y - tau_x)``;
+- ``servo_mismatch_rad``: the servos' phase mismatch on the circle,
+  ``omega (tau_y - tau_x)`` for pure lags, ``atan(omega tau_y) - atan(omega
+  tau_x)`` for first-order servos;
+- ``servo_amplitude_phase_rad``: the apparent ``theta_y - theta_x`` that
+  first-order servos add by shrinking each axis's amplitude by its own
+  ``1 / sqrt(1 + (omega tau)^2)``, seen through sensor axes turned by
+  ``eps_c``: about ``(A_x - A_y) / A sin(2 eps_c)``, the same in both
+  directions (0 for pure lags); included in ``expected_squareness_rad``;
 - ``gravity_phase_rad``: the apparent ``theta_y - theta_x`` that gravity
   coupling adds (position-angle domain, the same in both directions);
 - ``omega_rad_s``, ``amplitude_m_s2 = v^2/r``, ``sample_rate_hz``,
@@ -45,6 +52,7 @@ import math
 
 import numpy as np
 
+from imu_square.simulate.kinematics import servo_response
 from imu_square.units import G
 
 # Keys an earlier release wrote, each with the key that replaces it. They are
@@ -68,7 +76,44 @@ def _gravity_phases(program, machine):
     return theta_x, theta_y
 
 
-def _exact_theta_diff(program, machine, alpha_beta_t, eps):
+def servo_gains(machine, omega_rad_s):
+    """Each axis's amplitude gain through its servo on the circle (1 for pure lags)."""
+    return tuple(
+        servo_response(omega_rad_s, tau, machine.servo_model)[0]
+        for tau in (machine.tau_x_s, machine.tau_y_s)
+    )
+
+
+def servo_amplitude_phase(omega_rad_s, tau_x_s, tau_y_s, eps_c_rad, model="first_order"):
+    """Apparent ``theta_y - theta_x`` from the servos' amplitude mismatch alone.
+
+    Axis amplitudes ``g_x``, ``g_y`` seen through sensor axes turned by ``eps_c``:
+    ``tan theta_x = (g_y / g_x) tan eps_c`` and ``tan theta_y = (g_x / g_y) tan eps_c``,
+    so ``theta_y - theta_x ~ (g_x - g_y) sin(2 eps_c)``, the same in both directions.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Angular speed of the circle. [rad/s]
+    tau_x_s, tau_y_s : float
+        Servo time constants. [s]
+    eps_c_rad : float
+        Sensor rotation about Z. [rad]
+    model : {"pure_lag", "first_order"}
+        Servo model (:mod:`imu_square.simulate.kinematics`).
+
+    Returns
+    -------
+    float
+        [rad]
+    """
+    gx = servo_response(omega_rad_s, tau_x_s, model)[0]
+    gy = servo_response(omega_rad_s, tau_y_s, model)[0]
+    t = math.tan(eps_c_rad)
+    return math.atan2(gx * t, gy) - math.atan2(gy * t, gx)
+
+
+def _exact_theta_diff(program, machine, alpha_beta_t, eps, gains=(1.0, 1.0)):
     """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``."""
     beta, t_mean = alpha_beta_t
     cx, cy = program.centre_m
@@ -76,6 +121,7 @@ def _exact_theta_diff(program, machine, alpha_beta_t, eps):
     kxx, kxy, kyx, kyy = machine.tilt_per_m
     q = G * program.radius_m / program.centripetal_m_s2
     m = np.array([[1.0 + jxx - q * kxx, jxy - q * kxy], [jyx - q * kyx, 1.0 + jyy - q * kyy]])
+    m = m @ np.diag(gains)  # each axis's servo scales its own motion
     c, s = math.cos(eps), math.sin(eps)
     n = np.array([[c, s], [-s, c]]) @ m
     ny = -math.sin(beta) * n[0] + math.cos(beta) * n[1]
@@ -137,12 +183,17 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
         )
     effects = {**machine.effects(), **sensor.effects()}
     reversals = {}
+    delays = {}
     for axis, name, tau in ((0, "x", machine.tau_x_s), (1, "y", machine.tau_y_s)):
         times, _, _ = timeline.reversals(axis)
-        reversals[name] = [(t + tau) * clock_factor for t in times]
+        delays[name] = servo_response(omega, tau, machine.servo_model)[1]
+        reversals[name] = [(t + delays[name]) * clock_factor for t in times]
     local = float(geometry.local_machine_squareness(cx, cy, t_mean)) + 0.0
     yaw = float(geometry.carriage_yaw(cx, cy))
-    expected = _exact_theta_diff(program, machine, (beta, t_mean), sensor.eps_c_rad + yaw) + 0.0
+    rotation = sensor.eps_c_rad + yaw
+    gains = servo_gains(machine, omega)
+    expected = _exact_theta_diff(program, machine, (beta, t_mean), rotation, gains) + 0.0
+    without = _exact_theta_diff(program, machine, (beta, t_mean), rotation) + 0.0
     return {
         "machine_squareness_rad": alpha,
         "sensor_squareness_rad": beta,
@@ -151,7 +202,8 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns):
         "expected_squareness_rad": expected,
         "eps_c_rad": sensor.eps_c_rad,
         "carriage_yaw_rad": yaw,
-        "servo_mismatch_rad": omega * (machine.tau_y_s - machine.tau_x_s),
+        "servo_mismatch_rad": omega * (delays["y"] - delays["x"]),
+        "servo_amplitude_phase_rad": expected - without,
         "gravity_phase_rad": theta_gy - theta_gx,
         "omega_rad_s": omega,
         "amplitude_m_s2": program.centripetal_m_s2,
