@@ -241,3 +241,22 @@ def test_a_type_a_uncertainty_below_the_noise_floor_is_flagged():
         assert low == said
         flagged += low
     assert flagged >= 1
+
+
+@pytest.mark.slow
+def test_expanded_uncertainty_uses_students_t_and_covers():
+    # Four cycle pairs: 3 degrees of freedom, k = t_0.975,3 = 3.18 for 95 %.
+    from scipy import stats
+
+    covered = 0
+    runs = 40
+    for seed in range(runs):
+        rec, _ = synth_circle(PROG, alpha=50e-6, density=7e-5, fs=100.0, seed=100 + seed)
+        res = analyze(rec, replace(FAST, bootstrap_n=0))
+        assert res.u_squareness_dof == 3
+        assert res.coverage_factor == pytest.approx(stats.t.ppf(0.975, 3), rel=1e-12)
+        assert res.u_squareness_expanded_rad == res.coverage_factor * res.u_squareness_rad
+        covered += abs(res.squareness_rad - 50e-6) <= res.u_squareness_expanded_rad
+    # 95 % nominal; binomial sd over 40 runs is 3.4 %: at least 3 sd below.
+    assert covered / runs >= 0.95 - 3 * math.sqrt(0.95 * 0.05 / runs)
+    assert "k=3.18" in res.summary() and "95%" in res.summary()

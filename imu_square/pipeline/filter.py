@@ -24,9 +24,11 @@ at a 2.5 Hz circle settles in 0.27 s, longer than the 180 deg overshoot
 of a circle period) are bridged for the filter only: a least-squares fit of a
 line plus a sinusoid at the circle frequency to the samples either side
 predicts them, the whole stretch is filtered, and the bridged samples are
-marked invalid so that no later step uses them (``docs/model.md``, gaps). A
-longer gap breaks the data into stretches, each filtered on its own and
-never interpolated across.
+marked invalid so that no later step uses them (``docs/model.md``, gaps).
+The fit's window shrinks until the model fits its data to the noise (near a
+start or stop of motion); a gap that no window predicts, or a longer gap,
+breaks the data into stretches, each filtered on its own and never
+interpolated across.
 
 References
 ----------
@@ -49,11 +51,15 @@ CUTOFF_PER_CIRCLE_FREQUENCY = 8 * np.pi
 MAX_CUTOFF_OF_SAMPLE_RATE = 0.2
 # Gaps up to this fraction of a circle period (45 deg of arc) are bridged.
 MAX_BRIDGED_GAP_PERIODS = 0.125
-# Samples either side of a bridged gap used to predict it, in circle periods (and
-# at least twice the gap).
-BRIDGE_WINDOW_PERIODS = 0.25
+# The prediction of a bridged gap starts from this many gap lengths of samples
+# either side (at most a quarter period, at least _MIN_BRIDGE_WINDOW samples).
+BRIDGE_WINDOW_GAPS = 4
+_MIN_BRIDGE_WINDOW = 32
 # Least real samples on each side of a gap to bridge it.
 _MIN_BRIDGE_SAMPLES = 8
+# The prediction's model must fit its window to this multiple of the noise sd.
+_BRIDGE_FIT_TOLERANCE = 1.5
+_MAD_TO_SD = 1.4826
 
 
 def design_lowpass(cutoff_hz, order, sample_rate_hz):
@@ -208,6 +214,8 @@ class FilteredRecording:
         Indices of the first sample after each gap that is not bridged.
     bridged_spans_s : tuple of tuple (float, float)
         ``(last sample before, first sample after)`` of each bridged gap. [s]
+    max_bridged_s : float
+        Longest gap that may be bridged. [s]
     sample_rate_hz : float
         Nominal sample rate. [Hz]
     cutoff_hz : float
@@ -224,6 +232,7 @@ class FilteredRecording:
     valid: np.ndarray
     breaks: tuple
     bridged_spans_s: tuple
+    max_bridged_s: float
     sample_rate_hz: float
     cutoff_hz: float
     order: int
@@ -240,29 +249,70 @@ class FilteredRecording:
         return settling_time_s(self.cutoff_hz, self.order, 1e-6)
 
     @property
+    def reach_s(self):
+        """Settling time to 5 % (three time constants): how far a short gap moves the output. [s]"""
+        return settling_time_s(self.cutoff_hz, self.order, np.exp(-3.0))
+
+    @property
     def gap_spans_s(self):
         """``(last sample before, first sample after)`` of each gap not bridged. [s]"""
         return [(float(self.t_s[i - 1]), float(self.t_s[i])) for i in self.breaks]
 
     @property
-    def all_gap_spans_s(self):
-        """Every gap, bridged or not, as ``(last sample before, first sample after)``. [s]"""
-        return sorted([*self.gap_spans_s, *self.bridged_spans_s])
+    def short_gap_spans_s(self):
+        """Gaps no longer than :attr:`max_bridged_s`, bridged or not. [s]"""
+        short = [(a, b) for a, b in self.gap_spans_s if b - a <= self.max_bridged_s]
+        return sorted([*short, *self.bridged_spans_s])
+
+    @property
+    def long_gap_spans_s(self):
+        """Gaps longer than :attr:`max_bridged_s`. [s]"""
+        return [(a, b) for a, b in self.gap_spans_s if b - a > self.max_bridged_s]
 
 
-def _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window_s):
-    """Samples missing between ``i - 1`` and ``i``: line plus circle-frequency sinusoid."""
+def _noise_sd(t_s, raw):
+    """Per-axis noise sd from third differences (blind to a circle's curve at 1 kHz)."""
+    dt = np.median(np.diff(t_s[: min(t_s.size, 1000)]))
+    even = np.diff(t_s) < 1.5 * dt
+    steady = even[:-2] & even[1:-1] & even[2:]  # four consecutive samples, no gap
+    d3 = np.diff(raw, n=3, axis=0)[steady]
+    if d3.shape[0] == 0:
+        return np.full(raw.shape[1], np.inf)
+    # No prediction beats the float32 rounding the samples are stored with.
+    rounding = np.finfo(np.float32).eps * np.max(np.abs(raw), axis=0)
+    return np.maximum(_MAD_TO_SD * np.median(np.abs(d3), axis=0) / np.sqrt(20.0), rounding)
+
+
+def _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window_s, noise_sd):
+    """Samples missing between ``i - 1`` and ``i``, or None if they cannot be predicted.
+
+    A line plus a sinusoid at the circle frequency, fitted to the samples
+    within ``window_s`` either side (widened, up to a quarter period, until
+    each side holds :data:`_MIN_BRIDGE_SAMPLES`); where that model does not
+    fit its own data to the noise (the start or stop of motion, a ramp), the
+    window is halved, down to that least number of samples either side.
+    """
     t_a, t_b = t_s[i - 1], t_s[i]
-    lo = int(np.searchsorted(t_s, t_a - window_s))
-    hi = int(np.searchsorted(t_s, t_b + window_s, side="right"))
-    if min(i - lo, hi - i) < _MIN_BRIDGE_SAMPLES:
-        return None  # too little data on one side (the recording's edge): not bridged
-    u = t_s[lo:hi] - 0.5 * (t_a + t_b)
     w = 2 * np.pi * circle_frequency_hz
-    design = np.column_stack([np.ones_like(u), u, np.cos(w * u), np.sin(w * u)])
-    coef = np.linalg.lstsq(design, raw[lo:hi], rcond=None)[0]
+    widest = 0.25 / circle_frequency_hz
     v = t_fill - 0.5 * (t_a + t_b)
-    return np.column_stack([np.ones_like(v), v, np.cos(w * v), np.sin(w * v)]) @ coef
+    shrinking = False
+    while True:
+        lo = int(np.searchsorted(t_s, t_a - window_s))
+        hi = int(np.searchsorted(t_s, t_b + window_s, side="right"))
+        if min(i - lo, hi - i) < _MIN_BRIDGE_SAMPLES:
+            if shrinking or window_s >= widest:
+                return None  # too little data on one side (the recording's edge, other gaps)
+            window_s = min(2 * window_s, widest)
+            continue
+        u = t_s[lo:hi] - 0.5 * (t_a + t_b)
+        design = np.column_stack([np.ones_like(u), u, np.cos(w * u), np.sin(w * u)])
+        coef = np.linalg.lstsq(design, raw[lo:hi], rcond=None)[0]
+        rms = np.sqrt(np.mean((raw[lo:hi] - design @ coef)[:, :2] ** 2, axis=0))
+        if np.all(rms <= _BRIDGE_FIT_TOLERANCE * noise_sd[:2]):
+            return np.column_stack([np.ones_like(v), v, np.cos(w * v), np.sin(w * v)]) @ coef
+        shrinking = True
+        window_s /= 2
 
 
 def bridge_gaps(t_s, raw, gaps, circle_frequency_hz):
@@ -295,6 +345,7 @@ def bridge_gaps(t_s, raw, gaps, circle_frequency_hz):
     """
     period = 1.0 / circle_frequency_hz
     max_gap = MAX_BRIDGED_GAP_PERIODS * period
+    noise_sd = _noise_sd(t_s, raw) if len(gaps) else None
     pieces_t, pieces_x, pieces_v = [], [], []
     breaks, spans = [], []
     start = 0
@@ -306,10 +357,11 @@ def bridge_gaps(t_s, raw, gaps, circle_frequency_hz):
         pieces_v.append(np.ones(i - start, dtype=bool))
         start = i
         t_fill = t_a + (t_b - t_a) * np.arange(1, lost + 1) / (lost + 1)
-        window = max(BRIDGE_WINDOW_PERIODS * period, 2 * (t_b - t_a))
+        dt = (t_b - t_a) / (lost + 1)
+        window = max(min(BRIDGE_WINDOW_GAPS * (t_b - t_a), period / 4), _MIN_BRIDGE_WINDOW * dt)
         fill = None
         if 1 <= lost and t_b - t_a <= max_gap:
-            fill = _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window)
+            fill = _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window, noise_sd)
         if fill is None:
             breaks.append(i + inserted)
             continue
@@ -361,6 +413,7 @@ def filter_recording(recording, cutoff_hz, order, circle_frequency_hz):
         valid=valid,
         breaks=breaks,
         bridged_spans_s=spans,
+        max_bridged_s=MAX_BRIDGED_GAP_PERIODS / circle_frequency_hz,
         sample_rate_hz=fs,
         cutoff_hz=float(cutoff_hz),
         order=int(order),

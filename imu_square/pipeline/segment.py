@@ -439,14 +439,16 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, bridged_s=()
         A gap within this time of the start or stop of motion makes the anchor
         unknown. [s]
     gaps_s : sequence of tuple (float, float), optional
-        ``(last sample before, first sample after)`` of each gap that was not
-        bridged; found from the steps of ``motion.t_s`` if None. [s]
+        ``(last sample before, first sample after)`` of each long gap (not
+        bridged, :func:`imu_square.pipeline.filter.bridge_gaps`): one within
+        ``guard_s`` plus a tenth of a period refuses; found from the steps of
+        ``motion.t_s`` if None. [s]
     bridged_s : sequence of tuple (float, float)
-        The same for each bridged gap (:func:`imu_square.pipeline.filter.bridge_gaps`):
-        one that holds the start or stop of motion refuses; one within
-        ``reach_s`` of it widens the anchor's uncertainty by its length. [s]
+        The same for each short gap: one that holds the start or stop of
+        motion refuses; one within ``reach_s`` of it widens the anchor's
+        uncertainty by its length. [s]
     reach_s : float
-        How far the filter carries a bridged sample's prediction. [s]
+        How far the filter carries what a short gap changes. [s]
 
     Returns
     -------
@@ -504,12 +506,12 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, bridged_s=()
                 f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), so "
                 f"the motion midpoint that anchors the position angle is unknown"
             )
-        near = _gap_near(bridged_s, tc, reach_s)
-        bridged_near.append(0.0 if near is None else near[1] - near[0])
+        near = [b - a for a, b in bridged_s if a <= tc + reach_s and b >= tc - reach_s]
+        bridged_near.append(float(sum(near)))
     # Envelope noise over its slope at each crossing, and the sampling grid
-    # (an onset between two samples is placed uniformly within dt); a bridged
-    # gap within the filter's reach may move a crossing by up to its length,
-    # taken as uniform over it.
+    # (an onset between two samples is placed uniformly within dt); short gaps
+    # within the filter's reach may move a crossing by up to their total
+    # length, taken as uniform over it.
     sd = spread * level_s  # robust sd of the envelope [m/s^2]
     quant = np.median(np.diff(t_s)) / np.sqrt(12)
     u0 = np.hypot(np.hypot(sd / s0, quant), bridged_near[0] / np.sqrt(3))

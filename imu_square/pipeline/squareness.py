@@ -78,14 +78,14 @@ def analyze(recording, options=None, program=None):
     opts = options or AnalysisOptions()
     prog = _program_of(recording, program)
     data = filter_recording(recording, opts.cutoff_hz, opts.order, prog.frequency_hz)
-    gaps = {"gaps_s": data.gap_spans_s, "bridged_s": data.bridged_spans_s}
+    gaps = {"gaps_s": data.long_gap_spans_s, "bridged_s": data.short_gap_spans_s}
     seg = segment(
         data.t_s,
         data.xy,
         prog,
         block_events(recording),
         data.margin_s,
-        reach_s=data.margin_s,
+        reach_s=data.reach_s,
         **gaps,
     )
     q.check_period(seg.period_disagreement, seg.period_s, prog)
