@@ -531,8 +531,10 @@ def gaps(seeds, pool):
     )
     print(
         f"  {'lost':>5s} {'gaps':>6s} {'bias':>7s} {'±se':>5s} {'sd/CRB':>7s} {'sd/sd0':>7s} "
-        f"{'1/rt(1-f)':>9s} {'u/sd':>5s} {'eps/u_eps':>9s} {'refused anywhere':>16s}"
+        f"{'1/rt(1-f)':>9s} {'dif/sd0':>7s} {'rt(f/1-f)':>9s} {'u/sd':>5s} {'eps/u_eps':>9s} "
+        f"{'refused anywhere':>16s}"
     )
+    lossless = {r["seed"]: r[0.0]["clear"]["squareness_rad"] for r in rows}
     sd0 = None
     for fraction in LOST_FRACTIONS:
         ok = [r[fraction]["clear"] for r in rows if "error" not in r[fraction]["clear"]]
@@ -540,6 +542,13 @@ def gaps(seeds, pool):
         anywhere = [r[fraction]["anywhere"] for r in rows]
         refused = [a for a in anywhere if "error" in a and "of motion" in a["error"]]
         err = np.array([r["squareness_rad"] for r in ok]) - expected
+        paired = np.array(
+            [
+                r[fraction]["clear"]["squareness_rad"] - lossless[r["seed"]]
+                for r in rows
+                if "error" not in r[fraction]["clear"]
+            ]
+        )
         eps = np.array([(r["eps_c_rad"] - truth["eps_c_rad"]) / r["u_eps_c_rad"] for r in ok])
         sd = float(np.std(err, ddof=1))
         sd0 = sd if fraction == 0 else sd0
@@ -556,6 +565,8 @@ def gaps(seeds, pool):
             "sd_over_crb": float(sd / np.median([r["crb_rad"] for r in ok])),
             "sd_over_sd0": sd / sd0,
             "expected_sd_over_sd0": 1 / math.sqrt(1 - fraction),
+            "sd_change_over_sd0": float(np.std(paired, ddof=1) / sd0) if fraction else 0.0,
+            "expected_sd_change_over_sd0": math.sqrt(fraction / (1 - fraction)),
             "u_over_sd": float(np.median([r["u_squareness_rad"] for r in ok]) / sd),
             "eps_c_error_over_u_sd": float(np.std(eps, ddof=1)),
             "eps_c_error_over_u_max": float(np.max(np.abs(eps))),
@@ -566,12 +577,14 @@ def gaps(seeds, pool):
         print(
             f"  {stats['lost_mean']:5.1%} {stats['gaps_mean']:6.0f} {stats['bias_urad']:+7.2f} "
             f"{stats['se_bias_urad']:5.2f} {stats['sd_over_crb']:7.3f} {stats['sd_over_sd0']:7.3f} "
-            f"{stats['expected_sd_over_sd0']:9.3f} {stats['u_over_sd']:5.2f} "
+            f"{stats['expected_sd_over_sd0']:9.3f} {stats['sd_change_over_sd0']:7.3f} "
+            f"{stats['expected_sd_change_over_sd0']:9.3f} {stats['u_over_sd']:5.2f} "
             f"{stats['eps_c_error_over_u_sd']:9.2f} {stats['refused_anywhere']:16.1%}"
             + (f"  ({stats['failed']} failed)" if stats["failed"] else "")
         )
     print(
-        "  (CRB of the data left; sd/sd0 against the lossless sd and 1/sqrt(1 - lost); "
+        "  (CRB of the data left; sd/sd0 against the lossless sd and 1/sqrt(1 - lost); dif/sd0: "
+        "sd of the change from the lossless run of the same seed, against sqrt(lost/(1-lost)); "
         "eps/u_eps: sd of the eps_c error over its stated u; refused anywhere: runs with the "
         "same loss placed anywhere, refused for a gap over a start or stop of motion)"
     )

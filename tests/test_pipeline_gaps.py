@@ -130,3 +130,4 @@ def test_many_short_gaps_keep_every_cycle_and_the_result():
     # the floor counts the data left
     assert gappy.crb_rad / clean.crb_rad == pytest.approx(1 / math.sqrt(1 - lost), rel=0.01)
     assert abs(gappy.eps_c_rad - clean.eps_c_rad) < 3 * gappy.u_eps_c_rad
+    assert abs(gappy.eps_c_stage2_rad) < math.radians(0.01), "stage 2 leaves out missing points"

@@ -26,7 +26,7 @@ line plus a sinusoid at the circle frequency to the samples either side
 predicts them, the whole stretch is filtered, and the bridged samples are
 marked invalid so that no later step uses them (``docs/model.md``, gaps).
 The fit's window shrinks until the model fits its data to the noise (near a
-start or stop of motion); a gap that no window predicts, or a longer gap,
+start or stop of motion). A longer gap, or one at the recording's edge,
 breaks the data into stretches, each filtered on its own and never
 interpolated across.
 
@@ -287,32 +287,36 @@ def _predict_gap(t_s, raw, i, t_fill, circle_frequency_hz, window_s, noise_sd):
     """Samples missing between ``i - 1`` and ``i``, or None if they cannot be predicted.
 
     A line plus a sinusoid at the circle frequency, fitted to the samples
-    within ``window_s`` either side (widened, up to a quarter period, until
-    each side holds :data:`_MIN_BRIDGE_SAMPLES`); where that model does not
-    fit its own data to the noise (the start or stop of motion, a ramp), the
-    window is halved, down to that least number of samples either side.
+    within ``window_s`` either side (at least :data:`_MIN_BRIDGE_SAMPLES` each
+    side, at most a quarter period). Where that model does not fit its own data
+    to the noise (a start or stop of motion, a ramp, a spike) the window is
+    halved, down to that least window, whose fit is used whatever its residual:
+    what it cannot follow stays local, since the bridged samples are no data
+    and a start or stop of motion near them widens its uncertainty
+    (:func:`imu_square.pipeline.segment.check_block`). None at the recording's
+    edges or among other gaps, where a side lacks the samples.
     """
+    n = _MIN_BRIDGE_SAMPLES
+    if i < n or t_s.size - i < n:
+        return None
     t_a, t_b = t_s[i - 1], t_s[i]
-    w = 2 * np.pi * circle_frequency_hz
+    least = max(t_a - t_s[i - n], t_s[i + n - 1] - t_b)
     widest = 0.25 / circle_frequency_hz
+    if least > widest:
+        return None
+    w = 2 * np.pi * circle_frequency_hz
     v = t_fill - 0.5 * (t_a + t_b)
-    shrinking = False
+    window = min(max(window_s, least), widest)
     while True:
-        lo = int(np.searchsorted(t_s, t_a - window_s))
-        hi = int(np.searchsorted(t_s, t_b + window_s, side="right"))
-        if min(i - lo, hi - i) < _MIN_BRIDGE_SAMPLES:
-            if shrinking or window_s >= widest:
-                return None  # too little data on one side (the recording's edge, other gaps)
-            window_s = min(2 * window_s, widest)
-            continue
+        lo = int(np.searchsorted(t_s, t_a - window))
+        hi = int(np.searchsorted(t_s, t_b + window, side="right"))
         u = t_s[lo:hi] - 0.5 * (t_a + t_b)
         design = np.column_stack([np.ones_like(u), u, np.cos(w * u), np.sin(w * u)])
         coef = np.linalg.lstsq(design, raw[lo:hi], rcond=None)[0]
         rms = np.sqrt(np.mean((raw[lo:hi] - design @ coef)[:, :2] ** 2, axis=0))
-        if np.all(rms <= _BRIDGE_FIT_TOLERANCE * noise_sd[:2]):
+        if window <= least or np.all(rms <= _BRIDGE_FIT_TOLERANCE * noise_sd[:2]):
             return np.column_stack([np.ones_like(v), v, np.cos(w * v), np.sin(w * v)]) @ coef
-        shrinking = True
-        window_s /= 2
+        window = max(window / 2, least)
 
 
 def bridge_gaps(t_s, raw, gaps, circle_frequency_hz):

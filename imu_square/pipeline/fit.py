@@ -496,8 +496,11 @@ def fit_cross_terms(phi, stage1, norm=None, **irls_options):
     for i in range(c_y.size):
         ex = np.column_stack([np.ones_like(phi), np.cos(phi + np.pi / 2 - stage1.theta_y[i])])
         ey = np.column_stack([np.ones_like(phi), np.cos(phi - stage1.theta_x[i])])
-        c_y[i] = fit_irls(ex, stage1.x.resid[i], norm, **irls_options).params[0, 1]
-        c_x[i] = fit_irls(ey, stage1.y.resid[i], norm, **irls_options).params[0, 1]
+        pw = stage1.x.prior_weights[i]
+        pw = None if np.all(pw == 1.0) else pw  # points without data, left out
+        fx = fit_irls(ex, stage1.x.resid[i], norm, prior_weights=pw, **irls_options)
+        fy = fit_irls(ey, stage1.y.resid[i], norm, prior_weights=pw, **irls_options)
+        c_y[i], c_x[i] = fx.params[0, 1], fy.params[0, 1]
     eps = 0.5 * (np.arctan(c_x / stage1.amp_y) + np.arctan(c_y / stage1.amp_x))
     return CrossTermFit(c_x=c_x, c_y=c_y, eps_c=eps)
 

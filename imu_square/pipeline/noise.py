@@ -26,7 +26,7 @@ bound for the paper's 0.16 Hz circle and a 0.5 Hz corner.
   noise that the averaged cycle it is compared with holds (1 % for 15 cycles
   at the default cutoff, 5 % for 3);
 - the 1/f corner from its Welch spectrum below half the cutoff, by a Whittle
-  fit of ``a + b / f``, kept only where ``b`` exceeds twice its standard
+  fit of ``a + b / f``, kept only where ``b`` exceeds three times its standard
   error (a white sensor then gets exactly the white bound).
 """
 
@@ -43,7 +43,7 @@ _MAD_TO_SD = 1.4826
 # frequency); shorter stretches give no 1/f estimate below one period.
 _SEGMENT_PERIODS = 4
 # The 1/f term counts when it exceeds this many standard errors.
-_FLICKER_SIGNIFICANCE = 2.0
+_FLICKER_SIGNIFICANCE = 3.0
 
 
 @dataclass(frozen=True)

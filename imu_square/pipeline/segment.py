@@ -422,7 +422,7 @@ def match_blocks(motion, program, events=()):
     return chosen
 
 
-def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, bridged_s=(), reach_s=0.0):
+def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s=(), reach_s=0.0):
     """The block found in interval ``j``, refused unless it is a trustworthy circle.
 
     Parameters
@@ -443,10 +443,10 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, bridged_s=()
         bridged, :func:`imu_square.pipeline.filter.bridge_gaps`): one within
         ``guard_s`` plus a tenth of a period refuses; found from the steps of
         ``motion.t_s`` if None. [s]
-    bridged_s : sequence of tuple (float, float)
+    short_gaps_s : sequence of tuple (float, float)
         The same for each short gap: one that holds the start or stop of
-        motion refuses; one within ``reach_s`` of it widens the anchor's
-        uncertainty by its length. [s]
+        motion refuses; those within ``reach_s`` of it widen the anchor's
+        uncertainty by their total length over sqrt(12). [s]
     reach_s : float
         How far the filter carries what a short gap changes. [s]
 
@@ -498,7 +498,7 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, bridged_s=()
     bridged_near = []
     for label, tc in (("start", t0), ("stop", t1)):
         gap = _gap_near(spans, tc, guard_s + 0.1 * program.period_s) or _gap_near(
-            bridged_s, tc, 0.0
+            short_gaps_s, tc, 0.0
         )
         if gap is not None:
             raise AnalysisError(
@@ -506,20 +506,22 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, bridged_s=()
                 f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), so "
                 f"the motion midpoint that anchors the position angle is unknown"
             )
-        near = [b - a for a, b in bridged_s if a <= tc + reach_s and b >= tc - reach_s]
+        near = [b - a for a, b in short_gaps_s if a <= tc + reach_s and b >= tc - reach_s]
         bridged_near.append(float(sum(near)))
     # Envelope noise over its slope at each crossing, and the sampling grid
     # (an onset between two samples is placed uniformly within dt); short gaps
-    # within the filter's reach may move a crossing by up to their total
-    # length, taken as uniform over it.
+    # within the filter's reach move a crossing, taken as uniform over their
+    # total length (over 24 runs with 3 and 10 % lost the error was 0.4 of it).
     sd = spread * level_s  # robust sd of the envelope [m/s^2]
     quant = np.median(np.diff(t_s)) / np.sqrt(12)
-    u0 = np.hypot(np.hypot(sd / s0, quant), bridged_near[0] / np.sqrt(3))
-    u1 = np.hypot(np.hypot(sd / s1, quant), bridged_near[1] / np.sqrt(3))
+    u0 = np.hypot(np.hypot(sd / s0, quant), bridged_near[0] / np.sqrt(12))
+    u1 = np.hypot(np.hypot(sd / s1, quant), bridged_near[1] / np.sqrt(12))
     return Block(plan, t0, t1, 0.5 * float(np.hypot(u0, u1)), omega)
 
 
-def segment(t_s, accel_xy, program, events=(), guard_s=0.0, gaps_s=None, bridged_s=(), reach_s=0.0):
+def segment(
+    t_s, accel_xy, program, events=(), guard_s=0.0, gaps_s=None, short_gaps_s=(), reach_s=0.0
+):
     """Find the program's blocks in low-passed horizontal acceleration.
 
     Parameters
@@ -536,7 +538,7 @@ def segment(t_s, accel_xy, program, events=(), guard_s=0.0, gaps_s=None, bridged
     guard_s : float
         A gap in the samples within this time of a block's start or stop of
         motion makes that block's anchor unknown: refused. [s]
-    gaps_s, bridged_s, reach_s
+    gaps_s, short_gaps_s, reach_s
         Gaps not bridged and bridged, and the filter's reach: see :func:`check_block`.
 
     Returns
@@ -552,7 +554,7 @@ def segment(t_s, accel_xy, program, events=(), guard_s=0.0, gaps_s=None, bridged
     motion = find_motion(t_s, accel_xy, program)
     chosen = match_blocks(motion, program, events)
     blocks = tuple(
-        check_block(motion, j, plan, program, guard_s, gaps_s, bridged_s, reach_s)
+        check_block(motion, j, plan, program, guard_s, gaps_s, short_gaps_s, reach_s)
         for plan, j in zip(program.blocks(), chosen, strict=True)
     )
     weights = np.array([b.t_stop_s - b.t_start_s for b in blocks])

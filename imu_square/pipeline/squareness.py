@@ -78,15 +78,15 @@ def analyze(recording, options=None, program=None):
     opts = options or AnalysisOptions()
     prog = _program_of(recording, program)
     data = filter_recording(recording, opts.cutoff_hz, opts.order, prog.frequency_hz)
-    gaps = {"gaps_s": data.long_gap_spans_s, "bridged_s": data.short_gap_spans_s}
     seg = segment(
         data.t_s,
         data.xy,
         prog,
         block_events(recording),
         data.margin_s,
+        gaps_s=data.long_gap_spans_s,
+        short_gaps_s=data.short_gap_spans_s,
         reach_s=data.reach_s,
-        **gaps,
     )
     q.check_period(seg.period_disagreement, seg.period_s, prog)
     clipped = q.clipped_times(
@@ -100,8 +100,8 @@ def analyze(recording, options=None, program=None):
         bad,
         data.margin_s,
         opts.grid_points,
-        data.bridged_spans_s,
-        data.onset_margin_s,
+        missing_s=data.bridged_spans_s,
+        onset_margin_s=data.onset_margin_s,
     )
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
@@ -129,7 +129,7 @@ def analyze(recording, options=None, program=None):
     sq_dir = mean.squareness_rad
     fit = mean.fit
     servo_rad = 0.5 * float(sq_dir[0] - sq_dir[1]) / cos2
-    shrink = mean.amplitude_m_s2 / (seg.omega_rad_s**2 * prog.radius_m)
+    amplitude_over_circle = mean.amplitude_m_s2 / (seg.omega_rad_s**2 * prog.radius_m)
     return RunResult(
         squareness_rad=0.5 * float(sq_dir[0] + sq_dir[1]),
         u_squareness_rad=u_sq,
@@ -164,7 +164,7 @@ def analyze(recording, options=None, program=None):
         coverage_factor=k,
         u_squareness_expanded_rad=k * u_sq,
         servo_amplitude_bias_bound_rad=servo_amplitude_bound(
-            servo_rad, eps_c, shrink, opts.gain_tolerance
+            servo_rad, eps_c, amplitude_over_circle, opts.gain_tolerance
         ),
     )
 
