@@ -15,10 +15,11 @@ and in SciPy.
 
 **Cutoff.** The paper's 4 Hz serves its 0.159 Hz circle (omega = 1 rad/s):
 8 pi times the circle frequency. The default cutoff keeps that ratio
-(:func:`circle_cutoff_hz`), so the filter settles in 4.4 % of a period and
-leaves tens of independent noise samples per cycle at any feed; a fixed 4 Hz
-at a 2.5 Hz circle settles in 0.27 s, longer than the 180 deg overshoot
-(0.2 s), and lets the start of motion leak into the first analysed cycle.
+(:func:`circle_cutoff_hz`), so the filter's response to the start of motion
+dies out (to 1e-6) in 9 % of a period, well inside the 180 deg overshoot, and
+the averaged cycle keeps tens of independent noise samples at any feed; a
+fixed 4 Hz at a 2.5 Hz circle needs 0.55 s, longer than the overshoot (0.2 s),
+and the start of motion leaked into the first analysed cycle.
 
 **Gaps.** Samples lost in a *short* gap (at most :data:`MAX_BRIDGED_GAP_PERIODS`
 of a circle period) are bridged for the filter only: a least-squares fit of a

@@ -3,7 +3,8 @@
 Three figures, each answering a different question:
 
 - type A from the per-cycle scatter: the standard deviation of the paired
-  per-cycle values over the square root of the number of pairs (GUM type A);
+  per-cycle values over the square root of the number of pairs (GUM type A),
+  expanded by Student's t for its degrees of freedom (:func:`coverage_factor`);
 - bootstrap over cycles: resample whole cycles with replacement within each
   direction, redo the average and the fit, take the standard deviation;
 - the Cramér-Rao bound ``sqrt(2) d / (A sqrt(T))`` (``docs/model.md``), the
@@ -78,27 +79,6 @@ def bootstrap_counts(n_cycles, n_boot, rng):
     idx = rng.integers(0, n_cycles, size=(n_boot, n_cycles))
     np.add.at(counts, (np.arange(n_boot)[:, None], idx), 1.0)
     return counts
-
-
-def bootstrap_means(traces, n_boot, rng):
-    """Means of ``traces`` over cycles resampled with replacement.
-
-    Parameters
-    ----------
-    traces : ndarray, shape (n_cycles, n_grid)
-        One direction's cycles on the phi grid. [m/s^2]
-    n_boot : int
-        Number of resamples.
-    rng : numpy.random.Generator
-        Random source.
-
-    Returns
-    -------
-    ndarray, shape (n_boot, n_grid)
-        The resampled mean traces. [m/s^2]
-    """
-    n = traces.shape[0]
-    return bootstrap_counts(n, n_boot, rng) @ traces / n
 
 
 def cramer_rao(noise_density_m_s2_rthz, amplitude_m_s2, analysed_s):
