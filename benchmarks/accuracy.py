@@ -17,17 +17,44 @@ white noise of the two densities is then added to that recording (the
 simulator adds its noise the same way: independent Gaussian samples of
 sd ``d sqrt(fs/2)`` per axis). The 1/f case uses the simulator's own noise.
 
-Also: the paper's filter against alternatives (cutoff 1, 2, 4, 10 Hz; order
-1, 2, 4) on the clean case, and the speed of a 30-cycle 1 kHz run from
-reading the MCAP file to the result, against a straightforward
-implementation that fits every trace with ``statsmodels`` RLM.
+Also: the paper's filter against alternatives (cutoff 1, 2, 4, 10 Hz and the
+default 8 pi times the circle frequency; order 1, 2, 4) on the clean case, and
+the speed of a 30-cycle 1 kHz run from reading the MCAP file to the result,
+against a straightforward implementation that fits every trace with
+``statsmodels`` RLM.
+
+Three more sections, each runnable alone (``--section``):
+
+- ``high-accel`` (issue 9, section 0): 6.4 m/s^2 (r = 25 mm at 24 m/min, a
+  2.5 Hz circle), first-order servos of 1.5 and 2.1 ms, eps_c = 1.15 deg, the
+  paper's sensor without a stated noise density (as imported from CSV): the
+  reported noise floor over the true one, false warnings, robust outliers,
+  bias against the geometric measurand and against the measurand with the
+  servos' amplitude share, and how often that share lies within the reported
+  bound; with the default cutoff and with the paper's fixed 4 Hz;
+- ``gaps`` (issue 12, section 2): the paper's test with servo lags, samples
+  lost in short gaps (geometric lengths of mean 25 samples, as a USB-serial
+  link with light byte errors loses them) at 0, 1, 3, 10, 30 %: bias, sd over
+  the CRB of the data left, sd over the lossless sd against
+  ``1 / sqrt(1 - lost)``, type A over sd, eps_c error over its u; gaps are
+  placed uniformly but 0.3 s clear of the starts and stops of motion (a gap
+  there refuses, by design); the same loss placed anywhere gives the share of
+  runs refused;
+- ``coverage`` (issue 12, section 5): over 200 seeds at the paper's test, at
+  0.8 and 5 m/s^2, with servo lags of 1.5 and 2.1 ms, and at the paper's test
+  with 1/f noise: the fraction of runs whose error is within k u for k = 1,
+  2, 3, within the Student's t expanded uncertainty for 68.27/95.45/99.73 %,
+  and within 2 bootstrap sd; the run-to-run sd over the median u.
 
 Usage::
 
     python benchmarks/accuracy.py [--seeds 200] [--quick] [--workers 2]
+                                  [--section cases|speed|high-accel|gaps|coverage ...]
 
 ``--quick`` uses a 4-cycle program and 10 seeds unless ``--seeds`` is given;
-the acceptance run uses the paper's test (15 cycles each way).
+the acceptance run uses the paper's test (15 cycles each way). Without
+``--section`` every section runs (about 25 minutes with 2 workers); the
+sections run are merged into ``benchmarks/results/accuracy.json``.
 """
 
 import argparse
@@ -45,11 +72,16 @@ import numpy as np
 from imu_square.io.recording import SensorInfo
 from imu_square.program import TestProgram
 from imu_square.simulate import simulate_run
+from imu_square.simulate.machine import MachineModel
+from imu_square.simulate.noise import sensor_noise
 from imu_square.simulate.presets import with_effects
+from imu_square.simulate.sensor import SensorModel
+from imu_square.units import URAD
 
 LOW_D = 1e-6
 PAPER_D = 6.86e-5
 RESULTS = Path(__file__).parent / "results" / "accuracy.json"
+SECTIONS = ("cases", "speed", "high-accel", "gaps", "coverage")
 
 # name -> (simulator effects, sensor changes, machine changes, acceptance?)
 CASES = {
@@ -66,7 +98,7 @@ CASES = {
     "gravity coupling": (["gravity_coupling"], {}, {}, False),
     "sensor thermal drift": (["sensor_thermal_drift"], {}, {}, False),
 }
-FILTERS = [(c, o) for c in (1.0, 2.0, 4.0, 10.0) for o in (1, 2, 4)]
+FILTERS = [(c, o) for c in (1.0, 2.0, 4.0, 10.0, None) for o in (1, 2, 4)]
 
 
 def _options(**kw):
@@ -132,6 +164,7 @@ def _one(task):
                 "squareness_rad": r.squareness_rad,
                 "u_squareness_rad": r.u_squareness_rad,
                 "crb_rad": r.crb_rad,
+                "crb_white_rad": r.crb_white_rad,
                 "eps_c_rad": r.eps_c_rad,
                 "u_eps_c_rad": r.u_eps_c_rad,
                 "servo_mismatch_rad": r.servo_mismatch_rad,
@@ -140,7 +173,8 @@ def _one(task):
             out["filters"] = {}
             for cutoff, order in FILTERS:
                 r = analyze(recs["paper"], _options(cutoff_hz=cutoff, order=order))
-                out["filters"][f"{cutoff:g} Hz order {order}"] = r.squareness_rad
+                name = "8 pi f" if cutoff is None else f"{cutoff:g} Hz"
+                out["filters"][f"{name} order {order}"] = r.squareness_rad
     return out
 
 
@@ -154,6 +188,7 @@ def _stats(rows, case, level):
         [r["truth"]["expected_squareness_rad"] - r["truth"]["squareness_rad"] for r in ok]
     )
     crb = float(np.mean([r[level]["crb_rad"] for r in ok]))
+    crb_white = float(np.mean([r[level]["crb_white_rad"] for r in ok]))
     eps_err = np.array([r[level]["eps_c_rad"] - r["truth"]["eps_c_rad"] for r in ok])
     u_eps = np.array([r[level]["u_eps_c_rad"] for r in ok])
     servo = np.array([r[level]["servo_mismatch_rad"] for r in ok])
@@ -170,6 +205,7 @@ def _stats(rows, case, level):
         "sd_urad": float(np.std(err, ddof=1) * 1e6) if len(ok) > 1 else None,
         "crb_urad": crb * 1e6,
         "sd_over_crb": float(np.std(err, ddof=1) / crb) if len(ok) > 1 else None,
+        "sd_over_crb_white": float(np.std(err, ddof=1) / crb_white) if len(ok) > 1 else None,
         "mean_type_a_over_sd": float(np.mean(typea) / np.std(err, ddof=1)) if len(ok) > 1 else None,
         "eps_c_bias_deg": float(np.degrees(np.mean(eps_err))),
         "eps_c_max_abs_err_deg": float(np.degrees(np.max(np.abs(eps_err)))),
@@ -187,16 +223,19 @@ def _reference_analyze(recording, options, fit_kwargs):
     import statsmodels.api as sm
 
     from imu_square.pipeline.align import cycle_traces
-    from imu_square.pipeline.filter import lowpass, settling_time_s
+    from imu_square.pipeline.filter import circle_cutoff_hz, lowpass, settling_time_s
     from imu_square.pipeline.fit import sine_design
     from imu_square.pipeline.segment import segment
 
     prog = recording.program
     t = recording.time_s
-    xy = lowpass(recording.accel[:, :2], options.cutoff_hz, options.order, recording.sample_rate_hz)
+    fs = recording.sample_rate_hz
+    cutoff = options.cutoff_hz or circle_cutoff_hz(prog.frequency_hz, fs)
+    xy = lowpass(recording.accel[:, :2], cutoff, options.order, fs)
     seg = segment(t, xy, prog)
-    margin = settling_time_s(options.cutoff_hz, options.order)
-    cyc = cycle_traces(t, xy, seg, (), margin, options.grid_points)
+    margin = settling_time_s(cutoff, options.order)
+    onset = settling_time_s(cutoff, options.order, 1e-6)
+    cyc = cycle_traces(t, xy, seg, (), margin, options.grid_points, (), onset)
     X = sine_design(cyc.phi_grid)
     rng = np.random.default_rng(options.seed)
 
@@ -266,40 +305,409 @@ def _print_speed(sp):
     )
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, default=None, help="seeds per case (default 200)")
-    parser.add_argument("--quick", action="store_true", help="4-cycle program, 10 seeds")
-    parser.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
-    parser.add_argument("--no-speed", action="store_true", help="skip the speed measurement")
-    parser.add_argument(
-        "--speed-only",
-        action="store_true",
-        help="only the speed measurement (merged into the JSON)",
+# --- high acceleration (issue 9, section 0) ---------------------------------
+
+HIGH = TestProgram(radius_m=0.025, feed_m_per_s=0.4, cycles_per_direction=15)
+HIGH_LAGS_S = (1.5e-3, 2.1e-3)
+HIGH_EPS_C = math.radians(1.15)
+
+
+def _high_base():
+    machine = MachineModel(
+        tau_x_s=HIGH_LAGS_S[0], tau_y_s=HIGH_LAGS_S[1], servo_model="first_order"
     )
-    args = parser.parse_args(argv)
-    if args.speed_only:
-        sp = speed()
-        _print_speed(sp)
-        result = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-        result["speed"] = sp
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(json.dumps(result, indent=1))
-        return
-    seeds = args.seeds or (10 if args.quick else 200)
-    program = TestProgram(cycles_per_direction=4) if args.quick else TestProgram()
+    machine = replace(machine, geometry=replace(machine.geometry, machine_squareness_rad=50e-6))
+    sensor = SensorModel(eps_c_rad=HIGH_EPS_C, beta_rad=20e-6)
+    return simulate_run(HIGH, machine, sensor, seed=0)
+
+
+def _high_one(task):
+    """One seed at 6.4 m/s^2, without a stated density (as from CSV), two cutoffs."""
+    import warnings
+
+    from imu_square.pipeline.squareness import analyze
+
+    seed, base = task
+    rec = replace(_noisy(base, PAPER_D, seed), sensor=SensorInfo())
+    out = {"seed": seed}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for label, cutoff in (("default", None), ("4 Hz", 4.0)):
+            try:
+                r = analyze(rec, _options(cutoff_hz=cutoff))
+            except Exception as exc:
+                out[label] = {"error": f"{type(exc).__name__}: {exc}"}
+                continue
+            out[label] = {
+                "squareness_rad": r.squareness_rad,
+                "u_squareness_rad": r.u_squareness_rad,
+                "crb_rad": r.crb_rad,
+                "noise_density_m_s2_rthz": r.noise_density_m_s2_rthz,
+                "analysed_s": (r.cycles_used["ccw"] + r.cycles_used["cw"]) * r.period_s,
+                "amplitude_m_s2": 0.5 * (r.amp_x_m_s2 + r.amp_y_m_s2),
+                "outlier_fraction": r.quality["outlier_fraction"],
+                "warnings": r.quality["warnings"],
+                "bound_rad": r.servo_amplitude_bias_bound_rad,
+                "cutoff_hz": r.cutoff_hz,
+                "cycles": r.cycles_used,
+            }
+    return out
+
+
+def high_accel(seeds, pool):
+    """Noise floor, warnings, outliers and bias at 6.4 m/s^2 with first-order servos."""
+    base, truth = _high_base()
+    rows = list(pool.imap_unordered(_high_one, [(s, base) for s in range(seeds)]))
+    expected = truth["expected_squareness_rad"]
+    share = truth["servo_amplitude_phase_rad"]
+    amplitude = truth["amplitude_m_s2"]
+
+    def true_floor_rad(analysed_s):  # the white-noise bound with the true density
+        return math.sqrt(2) * PAPER_D / (amplitude * math.sqrt(analysed_s))
+
+    true_floor = true_floor_rad(2 * HIGH.cycles_per_direction * HIGH.period_s)
+    table = {
+        "program": HIGH.to_mapping(),
+        "servo_lags_s": HIGH_LAGS_S,
+        "eps_c_deg": math.degrees(HIGH_EPS_C),
+        "expected_squareness_urad": expected / URAD,
+        "servo_amplitude_phase_urad": share / URAD,
+        "true_noise_floor_urad": true_floor / URAD,
+    }
+    print(
+        f"\nhigh acceleration: {HIGH.centripetal_m_s2:.1f} m/s^2 (r = 25 mm, 24 m/min, "
+        f"{HIGH.frequency_hz:.2f} Hz), first-order servos 1.5/2.1 ms, eps_c 1.15 deg, "
+        f"7 ug/rtHz not stated (CSV); {seeds} seeds; true floor {true_floor / URAD:.2f} urad, "
+        f"servo amplitude share {share / URAD:+.2f} urad"
+    )
+    print(
+        f"  {'cutoff':8s} {'floor/true':>10s} {'d/true':>7s} {'warned':>6s} {'outl mean':>9s} "
+        f"{'outl max':>8s} {'bias':>7s} {'±se':>5s} {'bias-share':>10s} {'sd/floor':>8s} "
+        f"{'u/sd':>5s} {'in bound':>8s} {'bound':>6s}"
+    )
+    for label in ("default", "4 Hz"):
+        ok = [r[label] for r in rows if "error" not in r[label]]
+        if not ok:
+            print(f"  {label:8s} failed: {rows[0][label]['error']}")
+            continue
+        sq = np.array([r["squareness_rad"] for r in ok])
+        err = sq - expected  # the measurand with the servos' amplitude share
+        ratio = np.array([r["crb_rad"] / true_floor_rad(r["analysed_s"]) for r in ok])
+        floor = np.array([r["crb_rad"] for r in ok])
+        bound = np.array([r["bound_rad"] for r in ok])
+        inside = (share - 0.0) * (bound - share) >= 0  # share between 0 and the bound
+        stats = {
+            "n": len(ok),
+            "failed": seeds - len(ok),
+            "cutoff_hz": ok[0]["cutoff_hz"],
+            "floor_over_true_median": float(np.median(ratio)),
+            "floor_over_true_range": [float(ratio.min()), float(ratio.max())],
+            "density_over_true_median": float(
+                np.median([r["noise_density_m_s2_rthz"] for r in ok]) / PAPER_D
+            ),
+            "runs_warned": int(sum(bool(r["warnings"]) for r in ok)),
+            "warnings_seen": sorted({w.split(":")[0] for r in ok for w in r["warnings"]}),
+            "outlier_fraction_mean": float(np.mean([r["outlier_fraction"] for r in ok])),
+            "outlier_fraction_max": float(np.max([r["outlier_fraction"] for r in ok])),
+            "bias_urad": float(np.mean(err) / URAD),
+            "se_bias_urad": float(np.std(err, ddof=1) / math.sqrt(len(ok)) / URAD),
+            "bias_geometric_urad": float(np.mean(err + share) / URAD),
+            "sd_over_floor": float(np.std(err, ddof=1) / np.median(floor)),
+            "u_over_sd": float(
+                np.median([r["u_squareness_rad"] for r in ok]) / np.std(err, ddof=1)
+            ),
+            "share_within_bound": float(np.mean(inside)),
+            "bound_median_urad": float(np.median(bound) / URAD),
+            "cycles_median": {
+                d: float(np.median([r["cycles"][d] for r in ok])) for d in ("ccw", "cw")
+            },
+        }
+        table[label] = stats
+        print(
+            f"  {label:8s} {stats['floor_over_true_median']:10.3f} "
+            f"{stats['density_over_true_median']:7.3f} {stats['runs_warned']:6d} "
+            f"{stats['outlier_fraction_mean']:9.4f} {stats['outlier_fraction_max']:8.4f} "
+            f"{stats['bias_urad']:+7.2f} {stats['se_bias_urad']:5.2f} "
+            f"{stats['bias_geometric_urad']:+10.2f} {stats['sd_over_floor']:8.3f} "
+            f"{stats['u_over_sd']:5.2f} {stats['share_within_bound']:8.2f} "
+            f"{stats['bound_median_urad']:6.1f}"
+        )
+    print(
+        "  (floor/true: reported Cramer-Rao bound over sqrt(2) d / (A sqrt(T)) with the true d"
+        " and the run's analysed time;"
+        " bias against the measurand with the servos' amplitude share, bias-share: against the"
+        " geometric one; in bound: share between 0 and the reported bound)"
+    )
+    return table
+
+
+# --- short gaps (issue 12, section 2) -----------------------------------------
+
+LOST_FRACTIONS = (0.0, 0.01, 0.03, 0.10, 0.30)
+GAP_MEAN_SAMPLES = 25
+# Gaps kept this far from each commanded start and end of motion (ramp included) [s]
+CLEAR_S = 0.3
+
+
+def _drop(rec, fraction, rng, clear_s=()):
+    """Lose ``fraction`` of the samples in gaps of geometric length (mean 25 samples).
+
+    Gaps start uniformly over the recording; none overlaps an interval of ``clear_s``.
+    """
+    if fraction == 0:
+        return rec
+    n = rec.n_samples
+    t = rec.time_s
+    keep = np.ones(n, dtype=bool)
+    clear = np.zeros(n, dtype=bool)
+    for a, b in clear_s:
+        clear[np.searchsorted(t, a) : np.searchsorted(t, b)] = True
+    while 1 - keep.mean() < fraction:
+        k = max(1, int((fraction - (1 - keep.mean())) * n / GAP_MEAN_SAMPLES))
+        for start, length in zip(
+            rng.integers(1, n - 1, k), rng.geometric(1 / GAP_MEAN_SAMPLES, k), strict=True
+        ):
+            stop = min(start + length, n - 1)
+            if not clear[start:stop].any():
+                keep[start:stop] = False
+    return replace(rec, accel=rec.accel[keep], time_ns=rec.time_ns[keep], seq=rec.seq[keep])
+
+
+def _gaps_one(task):
+    import warnings
+
+    from imu_square.errors import AnalysisError
+    from imu_square.pipeline.squareness import analyze
+
+    seed, base, clear = task
+    noisy = _noisy(base, PAPER_D, 7919 + seed)
+    out = {"seed": seed}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for fraction in LOST_FRACTIONS:
+            rng = np.random.default_rng([seed, round(fraction * 1000)])
+            row = {}
+            for placement, keep_clear in (("clear", clear), ("anywhere", ())):
+                rec = _drop(noisy, fraction, rng, keep_clear)
+                try:
+                    r = analyze(rec, _options())
+                except AnalysisError as exc:
+                    row[placement] = {"error": str(exc)}
+                    continue
+                row[placement] = {
+                    "squareness_rad": r.squareness_rad,
+                    "u_squareness_rad": r.u_squareness_rad,
+                    "crb_rad": r.crb_rad,
+                    "eps_c_rad": r.eps_c_rad,
+                    "u_eps_c_rad": r.u_eps_c_rad,
+                    "lost": rec.lost_samples / (rec.lost_samples + rec.n_samples),
+                    "gaps": r.quality["gaps"],
+                    "bridged": r.quality["gaps_bridged"],
+                }
+            out[fraction] = row
+    return out
+
+
+def gaps(seeds, pool):
+    """Bias and efficiency against the fraction of samples lost in short gaps."""
+    machine, sensor = with_effects(["servo_mismatch"])
+    machine = replace(machine, geometry=replace(machine.geometry, machine_squareness_rad=50e-6))
+    sensor = replace(sensor, beta_rad=20e-6, eps_c_rad=math.radians(2.1))
+    base, truth = simulate_run(TestProgram(), machine, sensor, seed=0)
+    expected = truth["expected_squareness_rad"]
+    ramp = truth["ramp_s"]
+    clear = [
+        (t - CLEAR_S, t + ramp + CLEAR_S)
+        for b in truth["blocks"]
+        for t in (b["start_s"], b["end_s"] - ramp)
+    ]
+    tasks = [(s, base, clear) for s in range(seeds)]
+    rows = list(pool.imap_unordered(_gaps_one, tasks, chunksize=2))
+    table = {"gap_mean_samples": GAP_MEAN_SAMPLES, "clear_s": CLEAR_S}
+    print(
+        f"\nshort gaps: paper's test, servo lags 2/3 ms, 7 ug/rtHz, gaps of mean "
+        f"{GAP_MEAN_SAMPLES} samples kept {CLEAR_S} s clear of the starts and stops of "
+        f"motion; {seeds} seeds"
+    )
+    print(
+        f"  {'lost':>5s} {'gaps':>6s} {'bias':>7s} {'±se':>5s} {'sd/CRB':>7s} {'sd/sd0':>7s} "
+        f"{'1/rt(1-f)':>9s} {'dif/sd0':>7s} {'rt(f/1-f)':>9s} {'u/sd':>5s} {'eps/u_eps':>9s} "
+        f"{'refused anywhere':>16s}"
+    )
+    lossless = {r["seed"]: r[0.0]["clear"]["squareness_rad"] for r in rows}
+    sd0 = None
+    for fraction in LOST_FRACTIONS:
+        ok = [r[fraction]["clear"] for r in rows if "error" not in r[fraction]["clear"]]
+        failed = [r[fraction]["clear"]["error"] for r in rows if "error" in r[fraction]["clear"]]
+        anywhere = [r[fraction]["anywhere"] for r in rows]
+        refused = [a for a in anywhere if "error" in a and "of motion" in a["error"]]
+        err = np.array([r["squareness_rad"] for r in ok]) - expected
+        paired = np.array(
+            [
+                r[fraction]["clear"]["squareness_rad"] - lossless[r["seed"]]
+                for r in rows
+                if "error" not in r[fraction]["clear"]
+            ]
+        )
+        eps = np.array([(r["eps_c_rad"] - truth["eps_c_rad"]) / r["u_eps_c_rad"] for r in ok])
+        sd = float(np.std(err, ddof=1))
+        sd0 = sd if fraction == 0 else sd0
+        stats = {
+            "n": len(ok),
+            "failed": len(failed),
+            "errors": sorted(set(failed))[:3],
+            "lost_mean": float(np.mean([r["lost"] for r in ok])),
+            "gaps_mean": float(np.mean([r["gaps"] for r in ok])),
+            "bridged_mean": float(np.mean([r["bridged"] for r in ok])),
+            "bias_urad": float(np.mean(err) / URAD),
+            "se_bias_urad": float(sd / math.sqrt(len(ok)) / URAD),
+            "sd_urad": sd / URAD,
+            "sd_over_crb": float(sd / np.median([r["crb_rad"] for r in ok])),
+            "sd_over_sd0": sd / sd0,
+            "expected_sd_over_sd0": 1 / math.sqrt(1 - fraction),
+            "sd_change_over_sd0": float(np.std(paired, ddof=1) / sd0) if fraction else 0.0,
+            "expected_sd_change_over_sd0": math.sqrt(fraction / (1 - fraction)),
+            "u_over_sd": float(np.median([r["u_squareness_rad"] for r in ok]) / sd),
+            "eps_c_error_over_u_sd": float(np.std(eps, ddof=1)),
+            "eps_c_error_over_u_max": float(np.max(np.abs(eps))),
+            "refused_anywhere": len(refused) / len(anywhere),
+            "other_failures_anywhere": sum("error" in a for a in anywhere) - len(refused),
+        }
+        table[f"{fraction:g}"] = stats
+        print(
+            f"  {stats['lost_mean']:5.1%} {stats['gaps_mean']:6.0f} {stats['bias_urad']:+7.2f} "
+            f"{stats['se_bias_urad']:5.2f} {stats['sd_over_crb']:7.3f} {stats['sd_over_sd0']:7.3f} "
+            f"{stats['expected_sd_over_sd0']:9.3f} {stats['sd_change_over_sd0']:7.3f} "
+            f"{stats['expected_sd_change_over_sd0']:9.3f} {stats['u_over_sd']:5.2f} "
+            f"{stats['eps_c_error_over_u_sd']:9.2f} {stats['refused_anywhere']:16.1%}"
+            + (f"  ({stats['failed']} failed)" if stats["failed"] else "")
+        )
+    print(
+        "  (CRB of the data left; sd/sd0 against the lossless sd and 1/sqrt(1 - lost); dif/sd0: "
+        "sd of the change from the lossless run of the same seed, against sqrt(lost/(1-lost)); "
+        "eps/u_eps: sd of the eps_c error over its stated u; refused anywhere: runs with the "
+        "same loss placed anywhere, refused for a gap over a start or stop of motion)"
+    )
+    return table
+
+
+# --- coverage of the stated uncertainty (issue 12, section 5) -------------------
+
+COVERAGE_CASES = {
+    # name -> (radius m, feed m/s, 1/f corner Hz)
+    "paper's test, 0.1 m/s^2": (0.1, 0.1, 0.0),
+    "0.8 m/s^2 (r 50 mm, 12 m/min)": (0.05, 0.2, 0.0),
+    "5 m/s^2 (r 32 mm, 24 m/min)": (0.032, 0.4, 0.0),
+    "paper's test, 1/f corner 0.5 Hz": (0.1, 0.1, 0.5),
+}
+COVERAGE_K = (1.0, 2.0, 3.0)
+NOMINAL = (0.6827, 0.9545, 0.9973)
+
+
+def _coverage_base(case):
+    radius, feed, _ = COVERAGE_CASES[case]
+    program = TestProgram(radius_m=radius, feed_m_per_s=feed, cycles_per_direction=15)
+    machine = MachineModel(tau_x_s=1.5e-3, tau_y_s=2.1e-3)
+    machine = replace(machine, geometry=replace(machine.geometry, machine_squareness_rad=50e-6))
+    sensor = SensorModel(eps_c_rad=math.radians(2.1), beta_rad=20e-6)
+    return simulate_run(program, machine, sensor, seed=0)
+
+
+def _coverage_one(task):
+    import warnings
+
+    from imu_square.pipeline.squareness import AnalysisOptions, analyze
+
+    case, seed, base, expected = task
+    corner = COVERAGE_CASES[case][2]
+    rng = np.random.default_rng([seed, 31])
+    noise = sensor_noise(base.n_samples, base.sample_rate_hz, PAPER_D, corner, rng)
+    rec = replace(
+        base,
+        accel=base.accel.astype(np.float64) + noise,
+        sensor=SensorInfo(noise_density_m_s2_rthz=PAPER_D),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = analyze(rec, AnalysisOptions(bootstrap_n=200, seed=seed))
+    return {
+        "case": case,
+        "err_rad": r.squareness_rad - expected,
+        "u_rad": r.u_squareness_rad,
+        "u_boot_rad": r.u_squareness_bootstrap_rad,
+        "dof": r.u_squareness_dof,
+        "crb_rad": r.crb_rad,
+    }
+
+
+def coverage(seeds, pool):
+    """How often the stated uncertainty covers the error, against the nominal."""
+    from scipy import stats as st
+
+    tasks = []
+    for case in COVERAGE_CASES:
+        base, truth = _coverage_base(case)
+        tasks += [(case, s, base, truth["expected_squareness_rad"]) for s in range(seeds)]
+    rows = list(pool.imap_unordered(_coverage_one, tasks, chunksize=2))
+    table = {}
+    print(f"\ncoverage of the stated uncertainty, {seeds} seeds a case, 7 ug/rtHz, lags 1.5/2.1 ms")
+    print(
+        f"  {'case':32s} {'dof':>3s} {'|e|<=u':>7s} {'<=2u':>6s} {'<=3u':>6s} "
+        f"{'t68':>6s} {'t95':>6s} {'t99.7':>6s} {'2 boot':>6s} {'sd/med u':>8s} {'sd/CRB':>6s}"
+    )
+    for case in COVERAGE_CASES:
+        rs = [r for r in rows if r["case"] == case]
+        e = np.abs([r["err_rad"] for r in rs])
+        u = np.array([r["u_rad"] for r in rs])
+        dof = int(np.median([r["dof"] for r in rs]))
+        t_k = [float(st.t.ppf(0.5 + p / 2, dof)) for p in NOMINAL]
+        cov_k = [float(np.mean(e <= k * u)) for k in COVERAGE_K]
+        cov_t = [float(np.mean(e <= k * u)) for k in t_k]
+        sd = float(np.std([r["err_rad"] for r in rs], ddof=1))
+        stats = {
+            "n": len(rs),
+            "dof": dof,
+            "coverage_k": dict(zip(["1", "2", "3"], cov_k, strict=True)),
+            "nominal": list(NOMINAL),
+            "student_t_factors": t_k,
+            "coverage_student_t": dict(zip(["68.27", "95.45", "99.73"], cov_t, strict=True)),
+            "coverage_2_bootstrap": float(
+                np.mean(e <= 2 * np.array([r["u_boot_rad"] for r in rs]))
+            ),
+            "sd_over_median_u": sd / float(np.median(u)),
+            "sd_over_crb": sd / float(np.median([r["crb_rad"] for r in rs])),
+            "bias_urad": float(np.mean([r["err_rad"] for r in rs]) / URAD),
+            "se_bias_urad": sd / math.sqrt(len(rs)) / URAD,
+            # binomial standard error of a coverage near 95 %
+            "se_coverage_95": math.sqrt(0.95 * 0.05 / len(rs)),
+        }
+        table[case] = stats
+        print(
+            f"  {case:32s} {dof:3d} {cov_k[0]:7.1%} {cov_k[1]:6.1%} {cov_k[2]:6.1%} "
+            f"{cov_t[0]:6.1%} {cov_t[1]:6.1%} {cov_t[2]:6.1%} "
+            f"{stats['coverage_2_bootstrap']:6.1%} {stats['sd_over_median_u']:8.3f} "
+            f"{stats['sd_over_crb']:6.3f}"
+        )
+    print(
+        f"  (nominal 68.3/95.4/99.7 %; t68..t99.7: within Student's t_dof k u; binomial se "
+        f"{math.sqrt(0.95 * 0.05 / seeds):.1%} at 95 %)"
+    )
+    return table
+
+
+def cases_and_filters(seeds, program, pool, quick):
+    """The original table: bias, efficiency, eps_c and servo per case; the filter choice."""
     tasks = [(case, s, program, case == "clean") for case in CASES for s in range(seeds)]
     t0 = time.perf_counter()
     rows = []
-    with multiprocessing.get_context("fork").Pool(min(max(args.workers, 1), 2)) as pool:
-        for row in pool.imap_unordered(_one, tasks, chunksize=2):
-            rows.append(row)
-            if len(rows) % 100 == 0:
-                print(
-                    f"  {len(rows)}/{len(tasks)} done, {time.perf_counter() - t0:.0f} s",
-                    file=sys.stderr,
-                    flush=True,
-                )
+    for row in pool.imap_unordered(_one, tasks, chunksize=2):
+        rows.append(row)
+        if len(rows) % 100 == 0:
+            print(
+                f"  {len(rows)}/{len(tasks)} done, {time.perf_counter() - t0:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     elapsed = time.perf_counter() - t0
 
     table = {}
@@ -308,7 +716,7 @@ def main(argv=None):
     )
     head = (
         f"{'case':28s} {'bias@low':>9s} {'±se':>6s} {'S-(a+b)':>8s} {'sd/CRB@7ug':>10s} "
-        f"{'typeA/sd':>8s} "
+        f"{'sd/CRBw':>7s} {'typeA/sd':>8s} "
         f"{'eps err':>8s} {'eps u':>7s} {'in 2u':>6s} {'servo':>7s} {'fail':>4s}"
     )
     print(head)
@@ -323,6 +731,7 @@ def main(argv=None):
             f"{case:28s} {low['bias_urad']:+9.3f} {low['se_bias_urad'] or 0:6.3f} "
             f"{low['measurand_minus_alpha_plus_beta_urad']:+8.2f} "
             f"{paper['sd_over_crb'] or float('nan'):10.3f} "
+            f"{paper['sd_over_crb_white'] or float('nan'):7.3f} "
             f"{paper['mean_type_a_over_sd'] or float('nan'):8.3f} "
             f"{low['eps_c_max_abs_err_deg']:8.4f} {low['eps_c_mean_u_deg']:7.4f} "
             f"{low['eps_c_within_2u']:6.2f} "
@@ -330,8 +739,9 @@ def main(argv=None):
         )
     print(
         "(bias against the exact measurand S at 1e-6 m/s^2/rtHz in urad; S-(a+b): the exact "
-        "measurand minus alpha + beta; eps err = max |eps_c error| in deg at low noise; "
-        "servo = max relative error)"
+        "measurand minus alpha + beta; CRB at the noise at the circle frequency, CRBw for the "
+        "white density; eps err = max |eps_c error| in deg at low noise; servo = max relative "
+        "error)"
     )
 
     filt = {}
@@ -347,18 +757,52 @@ def main(argv=None):
         print(
             f"  {key:18s} {filt[key]['sd_over_crb']:.3f}  (bias {filt[key]['bias_urad']:+.2f} urad)"
         )
-
-    result = {
+    return {
         "seeds": seeds,
         "cycles_per_direction": program.cycles_per_direction,
-        "quick": args.quick,
+        "quick": quick,
         "elapsed_s": elapsed,
         "low_noise_m_s2_rthz": LOW_D,
         "paper_noise_m_s2_rthz": PAPER_D,
         "cases": table,
         "filters": filt,
     }
-    if not args.no_speed:
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, default=None, help="seeds per case (default 200)")
+    parser.add_argument("--quick", action="store_true", help="4-cycle program, 10 seeds")
+    parser.add_argument("--workers", type=int, default=2, help="processes (at most 2)")
+    parser.add_argument(
+        "--section",
+        action="append",
+        choices=SECTIONS,
+        help="run only this section (repeatable; default: all)",
+    )
+    parser.add_argument("--no-speed", action="store_true", help="skip the speed measurement")
+    parser.add_argument(
+        "--speed-only", action="store_true", help="only the speed measurement (= --section speed)"
+    )
+    args = parser.parse_args(argv)
+    sections = set(args.section or SECTIONS)
+    if args.speed_only:
+        sections = {"speed"}
+    if args.no_speed:
+        sections.discard("speed")
+    seeds = args.seeds or (10 if args.quick else 200)
+    program = TestProgram(cycles_per_direction=4) if args.quick else TestProgram()
+    result = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    with multiprocessing.get_context("fork").Pool(min(max(args.workers, 1), 2)) as pool:
+        if "cases" in sections:
+            result.update(cases_and_filters(seeds, program, pool, args.quick))
+        if "high-accel" in sections:
+            result["high_accel"] = high_accel(seeds, pool)
+        if "gaps" in sections:
+            result["gaps"] = gaps(seeds, pool)
+        if "coverage" in sections:
+            result["coverage"] = coverage(seeds, pool)
+    if "speed" in sections:
         sp = speed()
         result["speed"] = sp
         _print_speed(sp)

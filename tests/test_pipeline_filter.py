@@ -9,7 +9,6 @@ from imu_square.errors import AnalysisError
 from imu_square.pipeline.filter import (
     design_lowpass,
     lowpass,
-    noise_bandwidth_hz,
     settling_time_s,
 )
 
@@ -65,13 +64,6 @@ def test_settling_time_bounds_the_impulse_response():
     y = lowpass(x, 4.0, 1, FS)
     half = int(settling_time_s(4.0, 1) * FS)
     assert np.max(np.abs(y[4000 + half :])) < 2e-3 * y.max()
-
-
-def test_noise_bandwidth_of_first_order():
-    # First-order Butterworth: the integral of |H|^4 is pi fc / 4,
-    # that of (1 - |H|^2)^2 is fs/2 - 3 pi fc / 4.
-    assert_allclose(noise_bandwidth_hz(4.0, 1, FS), np.pi, rtol=2e-3)
-    assert_allclose(noise_bandwidth_hz(4.0, 1, FS, highpass=True), 500 - 3 * np.pi, rtol=1e-3)
 
 
 def test_bad_cutoff_and_order_are_refused():

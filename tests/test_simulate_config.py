@@ -58,7 +58,7 @@ def test_machine_file_units(tmp_path):
         "[machine]\nname = 'm1'\nramp_s = 0.2\nramp_profile = 's_curve'\n"
         "[geometry]\nmachine_squareness_um_per_m = -12.5\naxis_centre_mm = [100, -50]\n"
         "[squareness_drift]\nrate_um_per_m_per_h = 3.6\n"
-        "[servo_mismatch]\ntau_x_ms = 1.5\n"
+        "[servo_mismatch]\ntau_x_ms = 1.5\nmodel = 'first_order'\n"
         "[straightness_yaw]\nx_um = 4\nyaw_x = true\n"
         "[gravity_coupling]\nx_per_y_urad_per_m = 100\n"
     )
@@ -68,6 +68,7 @@ def test_machine_file_units(tmp_path):
     assert_allclose(m.geometry.machine_squareness_rate_rad_s, 1e-9, rtol=1e-12)
     assert_allclose(m.geometry.axis_centre_m, (0.1, -0.05), rtol=1e-12)
     assert_allclose(m.tau_x_s, 1.5e-3, rtol=1e-12)
+    assert m.servo_model == "first_order"
     assert m.geometry.yaw_x and not m.geometry.yaw_y
     assert_allclose(m.tilt_per_m, (0.0, 1e-4, 0.0, 0.0), rtol=1e-12)
 
@@ -79,6 +80,10 @@ def test_machine_file_units(tmp_path):
         ("[backlash]\nx_mm = 5\n", r"\[backlash\] has unknown field 'x_mm'; allowed: \["),
         ("[backlash]\nx_um = -5\n", r"\[backlash\] x_um must be in \[0, 1000\], got -5.0"),
         ("[servo_mismatch]\ntau_x_ms = 'fast'\n", r"tau_x_ms must be a number, got 'fast'"),
+        (
+            "[servo_mismatch]\nmodel = 'pid'\n",
+            r"\[servo_mismatch\] model must be one of \('pure_lag', 'first_order'\), got 'pid'",
+        ),
         ("[machine]\nramp_profile = 'sine'\n", r"ramp_profile must be one of \('trapezoid', "),
         ("[machine]\nramp_s = 0\n", r"\[machine\] ramp_s must be in \(0, 5\], got 0.0"),
         ("[straightness_yaw]\nyaw_x = 1\n", r"yaw_x must be true or false, got 1"),

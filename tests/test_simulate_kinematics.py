@@ -65,7 +65,16 @@ def breakpoints(timeline, machine):
     return np.array(points)
 
 
-@pytest.mark.parametrize("machine", [MachineModel(), ALL_DRIVE], ids=["ideal", "all-effects"])
+FIRST_ORDER = MachineModel(
+    tau_x_s=2e-3, tau_y_s=3e-3, servo_model="first_order", backlash_x_m=5e-6, spike_y_m_s2=0.02
+)
+
+
+@pytest.mark.parametrize(
+    "machine",
+    [MachineModel(), ALL_DRIVE, FIRST_ORDER],
+    ids=["ideal", "all-effects", "first-order-servo"],
+)
 def test_analytic_derivatives_match_finite_differences(machine):
     timeline = build_timeline(PROGRAM, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
     h = 2e-4

@@ -20,7 +20,11 @@ def register(sub):
     p.add_argument("--plot", metavar="OUT.png", help="write the traces, fits and convergence")
     p.add_argument("--program", help="test program TOML, overriding the recording's")
     p.add_argument(
-        "--cutoff-hz", type=float, default=4.0, help="low-pass cutoff (default: %(default)s)"
+        "--cutoff-hz",
+        type=float,
+        default=None,
+        help="low-pass cutoff (default: 8 pi x the circle frequency, the paper's 4 Hz at "
+        "its 0.16 Hz circle)",
     )
     p.add_argument("--order", type=int, default=1, help="low-pass order (default: %(default)s)")
     p.add_argument(
@@ -29,6 +33,14 @@ def register(sub):
         help="fit the same circle at two feeds or more jointly (a recording of a program with "
         "feeds_mm_per_min, or one recording per feed) and report the squareness freed of "
         "gravity coupling, the coupling, and each feed's plain result; --json writes one object",
+    )
+    p.add_argument(
+        "--gain-tolerance",
+        type=float,
+        default=0.01,
+        metavar="FRACTION",
+        help="largest error of the sensor's mean x/y gain, which bounds the servos' "
+        "amplitude share of the result (default: %(default)s)",
     )
     p.add_argument(
         "--bootstrap",
@@ -50,7 +62,10 @@ def run(args):
     from imu_square.units import SQUARENESS_UNIT, URAD
 
     options = AnalysisOptions(
-        cutoff_hz=args.cutoff_hz, order=args.order, bootstrap_n=args.bootstrap
+        cutoff_hz=args.cutoff_hz,
+        order=args.order,
+        bootstrap_n=args.bootstrap,
+        gain_tolerance=args.gain_tolerance,
     )
     program = read_program(args.program) if args.program else None
     if args.separate_gravity:

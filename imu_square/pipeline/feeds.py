@@ -117,7 +117,9 @@ def _boundaries_from_data(recording, program, options):
     feeds = [program.at_feed(f) for f in range(program.n_feeds)]
     omegas = np.array([p.omega_rad_s for p in feeds])
     shortest = min(p.period_s for p in feeds)
-    data = filter_recording(recording, options.cutoff_hz, options.order)
+    # the fastest circle's cutoff keeps every feed's circle
+    fastest = max(p.frequency_hz for p in feeds)
+    data = filter_recording(recording, options.cutoff_hz, options.order, fastest)
     t_s = data.t_s
     threshold = 0.5 * min(p.centripetal_m_s2 for p in feeds)
     rel, (starts, stops) = _motion(t_s, data.xy, threshold)

@@ -88,7 +88,10 @@ class FitResult:
     resid : ndarray, shape (n_fits, n_obs)
         Residuals. [unit of endog]
     weights : ndarray, shape (n_fits, n_obs)
-        Weights of the last IRLS step, in [0, 1].
+        Robust weights of the last IRLS step, in [0, 1].
+    prior_weights : ndarray, shape (n_fits, n_obs)
+        Inverse relative variance of each observation, 0 for none (all ones
+        unless given).
     scale : ndarray, shape (n_fits,)
         Robust scale (MAD about zero / 0.6745) of the residuals. [unit of endog]
     iterations : ndarray of int, shape (n_fits,)
@@ -104,14 +107,17 @@ class FitResult:
     cov: np.ndarray
     resid: np.ndarray
     weights: np.ndarray
+    prior_weights: np.ndarray
     scale: np.ndarray
     iterations: np.ndarray
     converged: np.ndarray
     options: dict = field(default_factory=dict)
 
 
-def _mad0(resid):
-    return np.median(np.abs(resid), axis=-1) / _MAD_TO_SD
+def _mad0(resid, present=None):
+    if present is None:
+        return np.median(np.abs(resid), axis=-1) / _MAD_TO_SD
+    return np.nanmedian(np.where(present, np.abs(resid), np.nan), axis=-1) / _MAD_TO_SD
 
 
 def _rho(norm, z):
@@ -146,13 +152,16 @@ def fit_irls(
     update_scale=True,
     start_params=None,
     freeze_scale_after=None,
+    prior_weights=None,
 ):
     """Robust linear regression of every row of ``endog`` on ``exog`` by IRLS.
 
     Same algorithm and defaults as ``statsmodels.robust.robust_linear_model.
     RLM(endog_row, exog, M=norm).fit(maxiter, tol, scale_est="mad", cov="H1",
     update_scale, conv)``, vectorised over rows; each row stops on its own
-    criterion.
+    criterion. With ``prior_weights`` it is that regression on the rows scaled
+    by their square root, observations of weight 0 left out altogether (also
+    from the scale and the covariance).
 
     Parameters
     ----------
@@ -178,6 +187,10 @@ def fit_irls(
         scale is a median, so with it IRLS can end in a 2-cycle (seen on single
         noisy cycles, up to 10 % of a standard error apart); with the scale
         fixed, IRLS descends and converges. None: statsmodels' behaviour.
+    prior_weights : ndarray, shape (n_obs,) or (n_fits, n_obs), optional
+        Inverse relative variance of each observation (e.g. how many cycles a
+        point of a mean trace averages); 0 marks a missing observation, whose
+        ``endog`` may be NaN. All ones if None.
 
     Returns
     -------
@@ -195,29 +208,43 @@ def fit_irls(
     n, p = exog.shape
     if endog.shape[-1] != n:
         raise AnalysisError(f"endog must have {n} columns like exog's rows, got {endog.shape}")
-    df_resid = n - p
     outer = (exog[:, :, None] * exog[:, None, :]).reshape(n, p * p)
+    if prior_weights is None:
+        prior = np.ones_like(endog)
+        present, root = None, None
+        df_resid = np.full(endog.shape[0], n - p)
+    else:
+        prior = np.broadcast_to(np.asarray(prior_weights, dtype=np.float64), endog.shape).copy()
+        present = prior > 0
+        endog = np.where(present, endog, 0.0)
+        root = np.sqrt(prior)
+        df_resid = np.count_nonzero(present, axis=-1) - p
 
-    w = np.ones_like(endog)
+    def scaled(r, idx=slice(None)):  # residuals in units of their own sd
+        return r if root is None else r * root[idx]
+
+    def mad(r, idx=slice(None)):
+        return _mad0(scaled(r, idx), None if present is None else present[idx])
+
     if start_params is None:
-        params = _solve_weighted(exog, outer, endog, w)
+        params = _solve_weighted(exog, outer, endog, prior)
     else:
         params = np.broadcast_to(np.asarray(start_params, dtype=np.float64), (endog.shape[0], p))
         params = params.copy()
     resid = endog - params @ exog.T
-    scale = _mad0(resid)
+    scale = mad(resid)
 
-    def criterion(params, resid, w):
+    def criterion(params, resid, w, idx):
         if conv == "coefs":
             return params.copy()
-        s2 = np.einsum("bn,bn->b", w, resid**2) / df_resid
-        return _rho(norm, resid / s2[:, None]).sum(axis=-1)
+        s2 = np.einsum("bn,bn->b", w, resid**2) / df_resid[idx]
+        return _rho(norm, scaled(resid, idx) / s2[:, None]).sum(axis=-1)
 
-    last = criterion(params, resid, w)
+    last = criterion(params, resid, prior, slice(None))
     iterations = np.ones(endog.shape[0], dtype=int)
     converged = np.zeros(endog.shape[0], dtype=bool)
     active = np.ones(endog.shape[0], dtype=bool)
-    weights = w
+    weights = np.ones_like(endog)
     while np.any(active):
         idx = np.flatnonzero(active)
         perfect = scale[idx] == 0.0
@@ -229,17 +256,18 @@ def fit_irls(
                 break
         if idx.size == active.size:
             idx = slice(None)  # all rows: views, no copies
-        w_i = _weights(norm, resid[idx] / scale[idx, None])
-        p_i = _solve_weighted(exog, outer, endog[idx], w_i)
+        w_i = _weights(norm, scaled(resid[idx], idx) / scale[idx, None])
+        wp_i = w_i if present is None else w_i * prior[idx]
+        p_i = _solve_weighted(exog, outer, endog[idx], wp_i)
         r_i = endog[idx] - p_i @ exog.T
         weights[idx], params[idx], resid[idx] = w_i, p_i, r_i
         if update_scale:
-            new_scale = _mad0(r_i)
+            new_scale = mad(r_i, idx)
             if freeze_scale_after is not None:
                 frozen = iterations[idx] >= freeze_scale_after
                 new_scale = np.where(frozen, scale[idx], new_scale)
             scale[idx] = new_scale
-        crit = criterion(p_i, r_i, w_i)
+        crit = criterion(p_i, r_i, wp_i, idx)
         iterations[idx] += 1
         change = np.abs(crit - last[idx])
         small = ~np.any(change > tol, axis=-1) if conv == "coefs" else ~(change > tol)
@@ -253,13 +281,17 @@ def fit_irls(
             ImuSquareWarning,
             stacklevel=2,
         )
-    cov = _cov_h1(norm, exog, resid, scale, df_resid)
+    cov = _cov_h1(norm, exog, scaled(resid), scale, present, prior, outer)
+    if present is not None:
+        resid = np.where(present, resid, np.nan)
+        weights = np.where(present, weights, 0.0)
     return FitResult(
         params=params,
         bse=np.sqrt(np.diagonal(cov, axis1=-2, axis2=-1)),
         cov=cov,
         resid=resid,
         weights=weights,
+        prior_weights=prior,
         scale=scale,
         iterations=iterations,
         converged=converged,
@@ -277,16 +309,25 @@ def fit_irls(
     )
 
 
-def _cov_h1(norm, exog, resid, scale, df_resid):
+def _cov_h1(norm, exog, resid, scale, present, prior, outer):
+    """statsmodels' "H1" covariance; ``resid`` already scaled by sqrt(prior)."""
     n, p = exog.shape
     safe = np.where(scale > 0, scale, 1.0)
     sresid = np.where(scale[:, None] > 0, resid / safe[:, None], 0.0)
     dpsi = norm.psi_deriv(sresid)
-    m = dpsi.mean(axis=-1)
-    k = 1 + p / n * dpsi.var(axis=-1) / m**2
-    ss_psi = np.sum(norm.psi(sresid) ** 2, axis=-1)
-    factor = k**2 * (ss_psi * scale**2 / df_resid) / m**2
-    return factor[:, None, None] * np.linalg.inv(exog.T @ exog)[None]
+    if present is None:
+        m = dpsi.mean(axis=-1)
+        k = 1 + p / n * dpsi.var(axis=-1) / m**2
+        ss_psi = np.sum(norm.psi(sresid) ** 2, axis=-1)
+        factor = k**2 * (ss_psi * scale**2 / (n - p)) / m**2
+        return factor[:, None, None] * np.linalg.inv(exog.T @ exog)[None]
+    n_i = np.count_nonzero(present, axis=-1)
+    m = np.sum(dpsi * present, axis=-1) / n_i
+    var = np.sum((dpsi - m[:, None]) ** 2 * present, axis=-1) / n_i
+    k = 1 + p / n_i * var / m**2
+    ss_psi = np.sum(norm.psi(sresid) ** 2 * present, axis=-1)
+    factor = k**2 * (ss_psi * scale**2 / (n_i - p)) / m**2
+    return factor[:, None, None] * np.linalg.inv((prior @ outer).reshape(-1, p, p))
 
 
 def sine_design(phi):
@@ -360,7 +401,9 @@ def _phase(a, b, cov, da, db):
     return np.arctan2(a, b), np.sqrt(var)
 
 
-def fit_circle(phi, accel_x, accel_y, norm=None, start_params=None, **irls_options):
+def fit_circle(
+    phi, accel_x, accel_y, norm=None, start_params=None, prior_weights=None, **irls_options
+):
     """Stage 1: robust sine fit of both axes in the position-angle domain.
 
     Parameters
@@ -374,6 +417,9 @@ def fit_circle(phi, accel_x, accel_y, norm=None, start_params=None, **irls_optio
     start_params : tuple of 2 ndarray, optional
         Starting coefficients ``[c, cos, sin]`` for x and for y, each of shape
         (3,) or (n_fits, 3); OLS if None. [m/s^2]
+    prior_weights : ndarray, shape (n_obs,) or (n_fits, n_obs), optional
+        Inverse relative variance of each point, 0 where it holds no data
+        (:func:`fit_irls`); the same for both axes.
     **irls_options
         Passed to :func:`fit_irls`.
 
@@ -383,8 +429,9 @@ def fit_circle(phi, accel_x, accel_y, norm=None, start_params=None, **irls_optio
     """
     exog = sine_design(phi)
     sx, sy = (None, None) if start_params is None else start_params
-    fx = fit_irls(exog, accel_x, norm, start_params=sx, **irls_options)
-    fy = fit_irls(exog, accel_y, norm, start_params=sy, **irls_options)
+    pw = prior_weights
+    fx = fit_irls(exog, accel_x, norm, start_params=sx, prior_weights=pw, **irls_options)
+    fy = fit_irls(exog, accel_y, norm, start_params=sy, prior_weights=pw, **irls_options)
     # a_x = c - A cos(phi - th) = c - A cos(th) cos(phi) - A sin(th) sin(phi)
     theta_x, u_x = _phase(-fx.params[:, 2], -fx.params[:, 1], fx.cov, 2, 1)
     # a_y = c - A sin(phi - th) = c + A sin(th) cos(phi) - A cos(th) sin(phi)
@@ -449,8 +496,11 @@ def fit_cross_terms(phi, stage1, norm=None, **irls_options):
     for i in range(c_y.size):
         ex = np.column_stack([np.ones_like(phi), np.cos(phi + np.pi / 2 - stage1.theta_y[i])])
         ey = np.column_stack([np.ones_like(phi), np.cos(phi - stage1.theta_x[i])])
-        c_y[i] = fit_irls(ex, stage1.x.resid[i], norm, **irls_options).params[0, 1]
-        c_x[i] = fit_irls(ey, stage1.y.resid[i], norm, **irls_options).params[0, 1]
+        pw = stage1.x.prior_weights[i]
+        pw = None if np.all(pw == 1.0) else pw  # points without data, left out
+        fx = fit_irls(ex, stage1.x.resid[i], norm, prior_weights=pw, **irls_options)
+        fy = fit_irls(ey, stage1.y.resid[i], norm, prior_weights=pw, **irls_options)
+        c_y[i], c_x[i] = fx.params[0, 1], fy.params[0, 1]
     eps = 0.5 * (np.arctan(c_x / stage1.amp_y) + np.arctan(c_y / stage1.amp_x))
     return CrossTermFit(c_x=c_x, c_y=c_y, eps_c=eps)
 
@@ -467,6 +517,10 @@ class MeanFit:
         The averaged traces on the phi grid. [m/s^2]
     amp_x_m_s2, amp_y_m_s2 : ndarray, shape (2,)
         Amplitudes corrected for the low-pass's gain at the circle frequency. [m/s^2]
+    counts : ndarray of int, shape (2, n_grid)
+        Cycles holding data at each grid point (all of them without bridged gaps).
+    gain : float
+        Amplitude gain of the low-pass and the resampling at the circle frequency.
     """
 
     fit: CircleFit
@@ -474,6 +528,8 @@ class MeanFit:
     mean_y: np.ndarray
     amp_x_m_s2: np.ndarray
     amp_y_m_s2: np.ndarray
+    counts: np.ndarray
+    gain: float
 
     @property
     def amplitude_m_s2(self):
@@ -502,16 +558,42 @@ def wrap_angle(angle_rad):
     return (np.asarray(angle_rad) + np.pi) % (2 * np.pi) - np.pi
 
 
+def masked_mean(traces, valid):
+    """Mean over cycles at each grid point, of the cycles holding data there.
+
+    Parameters
+    ----------
+    traces : ndarray, shape (n_cycles, n_grid)
+        Cycles on the phi grid, NaN where missing. [m/s^2]
+    valid : ndarray of bool, shape (n_cycles, n_grid)
+        Where the cycles hold data.
+
+    Returns
+    -------
+    mean : ndarray, shape (n_grid,)
+        The mean; 0 where no cycle holds data. [m/s^2]
+    counts : ndarray of int, shape (n_grid,)
+        Cycles averaged at each point.
+    """
+    counts = np.count_nonzero(valid, axis=0)
+    total = np.sum(np.where(valid, traces, 0.0), axis=0)
+    return total / np.maximum(counts, 1), counts
+
+
 def fit_mean_traces(cycles, gain, norm=None, **irls_options):
     """Average each direction's cycles and fit the two mean traces.
+
+    Each grid point averages the cycles that hold data there, and weighs in
+    the fit by how many they are (none: left out).
 
     Parameters
     ----------
     cycles : CycleTraces
         The flipped, resampled cycles of both directions.
     gain : float
-        Amplitude gain of the low-pass at the circle frequency, divided out of
-        the fitted amplitudes (the phases are untouched: the filter has zero phase).
+        Amplitude gain of the low-pass and the resampling at the circle
+        frequency, divided out of the fitted amplitudes (the phases are
+        untouched: both have zero phase).
     norm : statsmodels.robust.norms.RobustNorm, optional
         Tukey biweight if None.
     **irls_options
@@ -521,7 +603,13 @@ def fit_mean_traces(cycles, gain, norm=None, **irls_options):
     -------
     MeanFit
     """
-    mean_x = np.stack([cycles.ccw.x.mean(axis=0), cycles.cw.x.mean(axis=0)])
-    mean_y = np.stack([cycles.ccw.y.mean(axis=0), cycles.cw.y.mean(axis=0)])
-    fit = fit_circle(cycles.phi_grid, mean_x, mean_y, norm, **irls_options)
-    return MeanFit(fit, mean_x, mean_y, fit.amp_x / gain, fit.amp_y / gain)
+    dirs = (cycles.ccw, cycles.cw)
+    mx = [masked_mean(c.x, c.valid) for c in dirs]
+    my = [masked_mean(c.y, c.valid) for c in dirs]
+    mean_x = np.stack([m for m, _ in mx])
+    mean_y = np.stack([m for m, _ in my])
+    counts = np.stack([n for _, n in mx])
+    complete = all(c.complete for c in dirs)
+    prior = None if complete else counts / np.array([[c.n] for c in dirs], dtype=np.float64)
+    fit = fit_circle(cycles.phi_grid, mean_x, mean_y, norm, prior_weights=prior, **irls_options)
+    return MeanFit(fit, mean_x, mean_y, fit.amp_x / gain, fit.amp_y / gain, counts, float(gain))

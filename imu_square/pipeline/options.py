@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass
 
+from imu_square.errors import AnalysisError
 from imu_square.pipeline.fit import robust_norm
 
 
@@ -11,8 +12,10 @@ class AnalysisOptions:
 
     Attributes
     ----------
-    cutoff_hz : float
-        Low-pass cutoff of the designed Butterworth filter. [Hz]
+    cutoff_hz : float or None
+        Low-pass cutoff of the designed Butterworth filter; None ties it to the
+        circle: 8 pi times the circle frequency, the paper's 4 Hz at its
+        0.159 Hz circle (:func:`imu_square.pipeline.filter.circle_cutoff_hz`). [Hz]
     order : int
         Order of the designed filter (applied forward and backward).
     norm : {"tukey", "huber", "ols"}
@@ -41,9 +44,14 @@ class AnalysisOptions:
         Seed of the bootstrap.
     min_cycles : int
         Least usable cycles per direction.
+    gain_tolerance : float
+        Largest relative error of the sensor's mean x/y gain, which bounds the
+        servos' amplitude share of the result (:mod:`imu_square.pipeline.servo`).
+    coverage_probability : float
+        Probability of the expanded uncertainty (Student's t on the cycle pairs).
     """
 
-    cutoff_hz: float = 4.0
+    cutoff_hz: float | None = None
     order: int = 1
     norm: str = "tukey"
     tuning: float | None = None
@@ -55,6 +63,16 @@ class AnalysisOptions:
     bootstrap_n: int = 200
     seed: int = 0
     min_cycles: int = 3
+    gain_tolerance: float = 0.01
+    coverage_probability: float = 0.95
+
+    def __post_init__(self):
+        if not 0.0 <= self.gain_tolerance < 0.5:
+            raise AnalysisError(f"gain_tolerance must be in [0, 0.5), got {self.gain_tolerance!r}")
+        if not 0.0 < self.coverage_probability < 1.0:
+            raise AnalysisError(
+                f"coverage_probability must be in (0, 1), got {self.coverage_probability!r}"
+            )
 
     def robust_norm(self):
         """The robust norm these options name (a ``statsmodels`` norm)."""

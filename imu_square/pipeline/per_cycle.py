@@ -6,7 +6,9 @@ servo mismatch and ``eps_c``. Their scatter is the type A uncertainty, and
 their times (and temperatures) let the monitor regress the drift within a
 night. The bootstrap resamples whole cycles within each direction and refits
 the means. All rows share one phi grid, so they are solved as one vectorised
-IRLS batch, each started from its direction's fit of the mean.
+IRLS batch, each started from its direction's fit of the mean. Grid points
+inside bridged gaps hold no data and are left out of every fit (a resampled
+mean weighs each point by the cycles holding data there).
 """
 
 from dataclasses import dataclass
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imu_square.pipeline.fit import fit_circle, wrap_angle
-from imu_square.pipeline.uncertainty import bootstrap_means
+from imu_square.pipeline.uncertainty import bootstrap_counts
 
 
 @dataclass(frozen=True)
@@ -84,25 +86,26 @@ def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0
     """
     ccw, cw = cycles.ccw, cycles.cw
     rows_x, rows_y = [ccw.x, cw.x], [ccw.y, cw.y]
+    rows_w = [ccw.valid.astype(np.float64), cw.valid.astype(np.float64)]
     if bootstrap_n > 0:
         rng = np.random.default_rng(seed)
-        rows_x += [
-            bootstrap_means(ccw.x, bootstrap_n, rng),
-            bootstrap_means(cw.x, bootstrap_n, rng),
-        ]
-        rows_y += [
-            bootstrap_means(ccw.y, bootstrap_n, rng),
-            bootstrap_means(cw.y, bootstrap_n, rng),
-        ]
+        for c in (ccw, cw):
+            draws = bootstrap_counts(c.n, bootstrap_n, rng)
+            held = draws @ c.valid  # cycles holding data at each point, per resample
+            rows_x.append(draws @ np.where(c.valid, c.x, 0.0) / np.maximum(held, 1))
+            rows_y.append(draws @ np.where(c.valid, c.y, 0.0) / np.maximum(held, 1))
+            rows_w.append(held / c.n)
     counts = [ccw.n, cw.n] + ([bootstrap_n, bootstrap_n] if bootstrap_n > 0 else [])
     which = np.repeat([0, 1, 0, 1][: len(counts)], counts)
     main = mean_fit.fit
+    complete = ccw.complete and cw.complete
     batch = fit_circle(
         cycles.phi_grid,
         np.concatenate(rows_x),
         np.concatenate(rows_y),
         norm,
         start_params=(main.x.params[which], main.y.params[which]),
+        prior_weights=None if complete else np.concatenate(rows_w),
         **irls,
     )
     n1, n2 = ccw.n, cw.n

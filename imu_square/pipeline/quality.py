@@ -24,6 +24,8 @@ EXCESS_NOISE_FLAG = 3.0
 SCANT_SCATTER_FLAG = 0.5
 # Flag when more than this fraction of the averaged trace gets zero robust weight.
 OUTLIER_FLAG = 0.05
+# Flag a user's cutoff below this multiple of the circle frequency.
+MIN_CUTOFF_MARGIN = 10.0
 
 
 def format_accel(value):
@@ -147,16 +149,19 @@ def outlier_fractions(mean_fit):
     Returns
     -------
     list of float
-        ``[ccw, cw]``: samples of both axes with zero weight, over all.
+        ``[ccw, cw]``: points of both axes holding data with zero weight,
+        over all that hold data.
     """
     fit = mean_fit.fit
-    return [
-        float(np.mean(np.concatenate([fit.x.weights[i], fit.y.weights[i]]) == 0.0))
-        for i in range(2)
-    ]
+    out = []
+    for i in range(2):
+        held = np.concatenate([fit.x.prior_weights[i], fit.y.prior_weights[i]]) > 0
+        zero = np.concatenate([fit.x.weights[i], fit.y.weights[i]]) == 0.0
+        out.append(float(np.mean(zero[held])))
+    return out
 
 
-def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor):
+def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor, filtered):
     """Quality flags of a result that stands, each oddity with a line a machinist can act on.
 
     Parameters
@@ -177,6 +182,8 @@ def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor
         Type A uncertainty of the result. [rad]
     floor : NoiseFloor
         The noise floor.
+    filtered : FilteredRecording
+        The samples as filtered (cutoff, bridged gaps).
 
     Returns
     -------
@@ -188,8 +195,20 @@ def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor
     n_gaps = len(recording.gaps())
     if clipped.size:
         warnings.append(f"{clipped.size} samples at the sensor's full scale (clipping)")
+    n_bridged = len(filtered.bridged_spans_s)
     if n_gaps:
-        warnings.append(f"{n_gaps} gap(s), {recording.lost_samples} samples lost")
+        bridged = (
+            f" ({n_bridged} short one(s) bridged, their samples left out)" if n_bridged else ""
+        )
+        warnings.append(f"{n_gaps} gap(s), {recording.lost_samples} samples lost{bridged}")
+    f0 = 1 / seg.period_s
+    if filtered.cutoff_hz < MIN_CUTOFF_MARGIN * f0:
+        warnings.append(
+            f"low-pass cutoff {filtered.cutoff_hz:.3g} Hz is only "
+            f"{filtered.cutoff_hz / f0:.1f} x the circle frequency {f0:.3g} Hz (below "
+            f"{MIN_CUTOFF_MARGIN:g} x): few independent samples per cycle unsettle the robust "
+            f"fit; the default ties the cutoff to 8 pi x the circle frequency"
+        )
     if cyc.dropped:
         reasons = sorted({d["reason"] for d in cyc.dropped})
         warnings.append(f"{len(cyc.dropped)} cycle(s) dropped: {', '.join(reasons)}")
@@ -211,18 +230,19 @@ def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor
     if u_rad < SCANT_SCATTER_FLAG * crb:
         pairs = min(cyc.ccw.n, cyc.cw.n)
         warnings.append(
-            f"the type A uncertainty is only {u_rad / crb:.2f} x the white-noise bound: from "
+            f"the type A uncertainty is only {u_rad / crb:.2f} x the noise floor: from "
             f"{pairs} cycle pairs the scatter is itself uncertain, and no estimate beats the "
             f"bound; quote at least {crb / URAD:.1f} {SQUARENESS_UNIT}"
         )
     if u_rad > EXCESS_NOISE_FLAG * crb:
         warnings.append(
-            f"cycle-to-cycle scatter is {u_rad / crb:.1f} x the white-noise bound "
-            f"({floor.source} noise density): vibration, 1/f noise or drift"
+            f"cycle-to-cycle scatter is {u_rad / crb:.1f} x the noise floor "
+            f"({floor.source} noise density, 1/f included): vibration or drift"
         )
     return {
         "clipped_samples": int(clipped.size),
         "gaps": n_gaps,
+        "gaps_bridged": n_bridged,
         "lost_samples": int(recording.lost_samples),
         "cycles_dropped": [dict(d) for d in cyc.dropped],
         "amplitude_ratio": float(amplitude_ratio),

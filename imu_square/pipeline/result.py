@@ -59,10 +59,11 @@ class RunResult:
     u_squareness_bootstrap_rad : float
         Standard deviation of the bootstrap over cycles (NaN if skipped). [rad]
     crb_rad : float
-        Cramér-Rao bound for white noise of density :attr:`noise_density_m_s2_rthz`. [rad]
+        Cramér-Rao bound for the noise at the circle frequency,
+        :attr:`noise_density_circle_m_s2_rthz` (:mod:`imu_square.pipeline.noise`). [rad]
     noise_density_m_s2_rthz : float
-        Noise density used for the bound: the sensor's stated one if known,
-        else estimated from the data. [m/s^2/sqrt(Hz)]
+        White-noise density used for the bound: the sensor's stated one if
+        known, else estimated from what the fitted model leaves. [m/s^2/sqrt(Hz)]
     noise_density_source : str
         ``"sensor"`` or ``"residual"``.
     theta_x_rad, theta_y_rad : float
@@ -98,6 +99,31 @@ class RunResult:
         the overall means ``mean_x``, ``mean_y``. [m/s^2]
     options : AnalysisOptions
         The options used.
+    cutoff_hz : float
+        Cutoff of the low-pass actually used. [Hz]
+    cutoff_source : str
+        ``"circle"`` (8 pi times the circle frequency, the default) or
+        ``"options"`` (the user's).
+    noise_density_circle_m_s2_rthz : float
+        Noise density at the circle frequency, 1/f included. [m/s^2/sqrt(Hz)]
+    flicker_corner_hz : float
+        1/f corner of what the fitted model leaves (0: not significant, NaN:
+        stretches too short to tell). [Hz]
+    crb_white_rad : float
+        Cramér-Rao bound for the white density alone. [rad]
+    coverage_factor : float
+        Student's t factor for :attr:`u_squareness_dof` at
+        ``options.coverage_probability``.
+    u_squareness_expanded_rad : float
+        ``coverage_factor * u_squareness_rad``. [rad]
+    servo_amplitude_bias_bound_rad : float
+        The servos' amplitude mismatch, seen through ``eps_c``, shifts
+        ``theta_y - theta_x`` by a value between 0 and this (signed), the same
+        every run while the servos and the mounting stay
+        (:mod:`imu_square.pipeline.servo`). [rad]
+
+    The fields after ``options`` have defaults only so that results built by
+    hand stay valid; :func:`~imu_square.pipeline.squareness.analyze` sets them all.
     """
 
     squareness_rad: float
@@ -125,6 +151,14 @@ class RunResult:
     quality: dict
     traces: dict = field(repr=False)
     options: AnalysisOptions = field(default_factory=AnalysisOptions)
+    cutoff_hz: float = math.nan
+    cutoff_source: str = ""
+    noise_density_circle_m_s2_rthz: float = math.nan
+    flicker_corner_hz: float = math.nan
+    crb_white_rad: float = math.nan
+    coverage_factor: float = math.nan
+    u_squareness_expanded_rad: float = math.nan
+    servo_amplitude_bias_bound_rad: float = math.nan
 
     @property
     def cos_2eps_c(self):
@@ -142,16 +176,22 @@ class RunResult:
         """
         q = self.quality
         unit = SQUARENESS_UNIT
+        p = self.options.coverage_probability
         lines = [
             f"squareness {self.squareness_rad / URAD:.1f} ± {self.u_squareness_rad / URAD:.1f} "
-            f"{unit} (theta_y - theta_x, type A, k=1; bootstrap "
-            f"{self.u_squareness_bootstrap_rad / URAD:.1f}, noise floor {self.crb_rad / URAD:.1f})",
+            f"{unit} (theta_y - theta_x, type A, k=1, {self.u_squareness_dof} dof; {p:.0%}: "
+            f"± {self.u_squareness_expanded_rad / URAD:.1f}, k={self.coverage_factor:.2f}; "
+            f"bootstrap {self.u_squareness_bootstrap_rad / URAD:.1f}, "
+            f"noise floor {self.crb_rad / URAD:.1f})",
             f"  eps_c {math.degrees(self.eps_c_rad):.3f} ± {math.degrees(self.u_eps_c_rad):.3f}°, "
             f"servo mismatch {self.servo_mismatch_rad / URAD:.1f} ± "
-            f"{self.u_servo_mismatch_rad / URAD:.1f} {unit}, cycles "
+            f"{self.u_servo_mismatch_rad / URAD:.1f} {unit} (its amplitude share: 0 to "
+            f"{self.servo_amplitude_bias_bound_rad / URAD:+.1f} {unit}), cycles "
             f"{self.cycles_used['ccw']} CCW + {self.cycles_used['cw']} CW, "
             f"amplitude {q['amplitude_ratio']:.3f} x v²/r, "
-            f"period {q['period_disagreement']:+.3%}",
+            f"period {q['period_disagreement']:+.3%}, "
+            f"low-pass {self.cutoff_hz:.3g} Hz"
+            f"{' (8 pi x circle frequency)' if self.cutoff_source == 'circle' else ''}",
         ]
         lines += [f"  warning: {w}" for w in q["warnings"]]
         return "\n".join(lines)
@@ -203,6 +243,14 @@ class RunResult:
             "period_s": self.period_s,
             "quality": _jsonable(self.quality),
             "options": asdict(self.options),
+            "cutoff_hz": self.cutoff_hz,
+            "cutoff_source": self.cutoff_source,
+            "noise_density_circle_m_s2_rthz": self.noise_density_circle_m_s2_rthz,
+            "flicker_corner_hz": _finite(self.flicker_corner_hz),
+            "crb_white_urad": self.crb_white_rad / URAD,
+            "coverage_factor": _finite(self.coverage_factor),
+            "u_squareness_expanded_urad": _finite(self.u_squareness_expanded_rad / URAD),
+            "servo_amplitude_bias_bound_urad": self.servo_amplitude_bias_bound_rad / URAD,
         }
 
 

@@ -15,7 +15,11 @@ frozen :class:`RunResult`:
   the paper's stage 2 is degenerate, see :mod:`imu_square.pipeline.fit`; its
   value is kept as ``eps_c_stage2_rad``);
 - uncertainties: type A from the per-cycle scatter (CCW cycle k paired with
-  CW cycle k), a bootstrap over cycles, and the Cramér-Rao bound;
+  CW cycle k) with its Student's t coverage factor, a bootstrap over cycles,
+  and the Cramér-Rao bound for the noise at the circle frequency
+  (:mod:`imu_square.pipeline.noise`);
+- a bound on what the servos' amplitude mismatch adds through ``eps_c``
+  (:mod:`imu_square.pipeline.servo`);
 - quality flags, and refusal (:class:`AnalysisError`) when the data cannot give
   a trustworthy number.
 
@@ -33,15 +37,17 @@ import numpy as np
 from imu_square.errors import AnalysisError
 from imu_square.log import logger
 from imu_square.pipeline import quality as q
-from imu_square.pipeline.align import bad_intervals, cycle_traces
+from imu_square.pipeline.align import bad_intervals, cycle_traces, interpolation_gain
 from imu_square.pipeline.filter import filter_recording, passband_gain
 from imu_square.pipeline.fit import fit_cross_terms, fit_mean_traces
+from imu_square.pipeline.noise import noise_floor
 from imu_square.pipeline.options import AnalysisOptions
 from imu_square.pipeline.per_cycle import fit_cycles
 from imu_square.pipeline.result import DirectionResult, RunResult
 from imu_square.pipeline.rotation import circular_mean, eps_c_uncertainty, estimate_eps_c
 from imu_square.pipeline.segment import block_events, segment
-from imu_square.pipeline.uncertainty import noise_floor, type_a
+from imu_square.pipeline.servo import servo_amplitude_bound
+from imu_square.pipeline.uncertainty import coverage_factor, type_a
 
 __all__ = ["AnalysisOptions", "DirectionResult", "RunResult", "analyze"]
 
@@ -71,18 +77,37 @@ def analyze(recording, options=None, program=None):
     """
     opts = options or AnalysisOptions()
     prog = _program_of(recording, program)
-    data = filter_recording(recording, opts.cutoff_hz, opts.order)
-    seg = segment(data.t_s, data.xy, prog, block_events(recording), guard_s=data.margin_s)
+    data = filter_recording(recording, opts.cutoff_hz, opts.order, prog.frequency_hz)
+    seg = segment(
+        data.t_s,
+        data.xy,
+        prog,
+        block_events(recording),
+        data.margin_s,
+        gaps_s=data.long_gap_spans_s,
+        short_gaps_s=data.short_gap_spans_s,
+        reach_s=data.reach_s,
+    )
     q.check_period(seg.period_disagreement, seg.period_s, prog)
-    clipped = q.clipped_times(data.t_s, data.raw, recording.sensor.range_m_s2)
+    clipped = q.clipped_times(
+        data.t_s[data.valid], data.raw[data.valid], recording.sensor.range_m_s2
+    )
     bad = bad_intervals(data.gap_spans_s, clipped)
-    cyc = cycle_traces(data.t_s, data.xy, seg, bad, data.margin_s, opts.grid_points)
+    cyc = cycle_traces(
+        data.t_s,
+        data.xy,
+        seg,
+        bad,
+        data.margin_s,
+        opts.grid_points,
+        missing_s=data.bridged_spans_s,
+        onset_margin_s=data.onset_margin_s,
+    )
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
     norm, irls = opts.robust_norm(), opts.irls()
-    gain = passband_gain(
-        seg.omega_rad_s / (2 * np.pi), opts.cutoff_hz, opts.order, data.sample_rate_hz
-    )
+    f0, fs = 1 / seg.period_s, data.sample_rate_hz
+    gain = passband_gain(f0, data.cutoff_hz, opts.order, fs) * interpolation_gain(f0, fs)
     mean = fit_mean_traces(cyc, gain, norm, **irls)
     amplitude_ratio = q.check_amplitude(mean.amplitude_m_s2, prog)
     eps_c = estimate_eps_c(mean)
@@ -94,17 +119,17 @@ def analyze(recording, options=None, program=None):
             f"(cycles used: {cyc.ccw.n} CCW, {cyc.cw.n} CW)"
         )
     u_sq = type_a(cycles.squareness_rad)
-    analysed_s = (cyc.ccw.n + cyc.cw.n) * seg.period_s
-    floor = noise_floor(
-        data, seg, recording.sensor, mean.amplitude_m_s2, analysed_s, opts.cutoff_hz, opts.order
-    )
+    k = coverage_factor(cycles.n_pairs - 1, opts.coverage_probability)
+    floor = noise_floor(data, seg, cyc, mean, recording.sensor)
     outliers = q.outlier_fractions(mean)
-    quality = q.assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_sq, floor)
+    quality = q.assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_sq, floor, data)
     for w in quality["warnings"]:
         logger.debug("quality: %s", w)
 
     sq_dir = mean.squareness_rad
     fit = mean.fit
+    servo_rad = 0.5 * float(sq_dir[0] - sq_dir[1]) / cos2
+    amplitude_over_circle = mean.amplitude_m_s2 / (seg.omega_rad_s**2 * prog.radius_m)
     return RunResult(
         squareness_rad=0.5 * float(sq_dir[0] + sq_dir[1]),
         u_squareness_rad=u_sq,
@@ -120,7 +145,7 @@ def analyze(recording, options=None, program=None):
         eps_c_stage2_rad=float(np.mean(fit_cross_terms(cyc.phi_grid, fit, norm, **irls).eps_c)),
         amp_x_m_s2=float(np.mean(mean.amp_x_m_s2)),
         amp_y_m_s2=float(np.mean(mean.amp_y_m_s2)),
-        servo_mismatch_rad=0.5 * float(sq_dir[0] - sq_dir[1]) / cos2,
+        servo_mismatch_rad=servo_rad,
         u_servo_mismatch_rad=type_a(cycles.servo_mismatch_rad),
         ccw=_direction(mean, 0, cyc.ccw.n, outliers),
         cw=_direction(mean, 1, cyc.cw.n, outliers),
@@ -131,6 +156,16 @@ def analyze(recording, options=None, program=None):
         quality=quality,
         traces=_traces(cyc.phi_grid, mean),
         options=opts,
+        cutoff_hz=data.cutoff_hz,
+        cutoff_source="circle" if opts.cutoff_hz is None else "options",
+        noise_density_circle_m_s2_rthz=floor.circle_density_m_s2_rthz,
+        flicker_corner_hz=floor.flicker_corner_hz,
+        crb_white_rad=floor.crb_white_rad,
+        coverage_factor=k,
+        u_squareness_expanded_rad=k * u_sq,
+        servo_amplitude_bias_bound_rad=servo_amplitude_bound(
+            servo_rad, eps_c, amplitude_over_circle, opts.gain_tolerance
+        ),
     )
 
 

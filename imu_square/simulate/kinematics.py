@@ -1,13 +1,87 @@
-"""The carriage's actual motion: commanded path -> servo lag -> drive effects -> geometry.
+"""The carriage's actual motion: commanded path -> servo -> drive effects -> geometry.
 
-Each axis follows its commanded path a pure time lag ``tau`` late, plus the
-backlash, friction bump and vibration started at its reversals (which happen
-``tau`` after the commanded reversals). The geometric error map then turns the
-axis positions into the actual carriage position. Position, velocity and
-acceleration are carried exactly through every step; nothing is differenced.
+Each axis follows its commanded path through its servo, plus the backlash,
+friction bump and vibration started at its reversals (which happen when the
+servo has carried the commanded reversal through). The geometric error map
+then turns the axis positions into the actual carriage position. Position,
+velocity and acceleration are carried exactly through every step; nothing is
+differenced.
+
+Servo models (``MachineModel.servo_model``), with time constant ``tau`` per axis:
+
+- ``"pure_lag"``: the axis is the command ``tau`` late, ``e^(-s tau)``; the
+  circle keeps its amplitude;
+- ``"first_order"``: a position loop of gain ``1/tau`` without feed-forward,
+  ``1 / (1 + s tau)``. On the circle of angular speed ``omega`` its steady
+  response is the command, about the circle's centre, scaled by
+  ``1 / sqrt(1 + (omega tau)^2)`` and ``atan(omega tau) / omega`` late: the
+  two axes' amplitudes differ at second order in ``omega tau``, which pure
+  lags never do. The steady response is applied to each block with its own
+  ``omega`` (ramps and dwells included), so the ramps lack the first-order
+  transient, a few ``tau`` long, and the carriage at rest sits ``(1 - gain)``
+  of the radius off its command towards the centre; neither reaches the
+  analysed cycles.
 """
 
+import math
+
+import numpy as np
+
 from imu_square.simulate.drive import add_backlash, add_spikes, add_vibration
+
+SERVO_MODELS = ("pure_lag", "first_order")
+
+
+def servo_response(omega_rad_s, tau_s, model):
+    """Steady gain and delay of one axis's servo on a circle.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Angular speed of the circle. [rad/s]
+    tau_s : float
+        The axis's servo time constant (pure lag: the lag). [s]
+    model : {"pure_lag", "first_order"}
+        The servo model (module docstring).
+
+    Returns
+    -------
+    gain : float
+        Amplitude of the actual over the commanded circle.
+    delay_s : float
+        Phase lag over ``omega``. [s]
+    """
+    if model == "pure_lag" or tau_s == 0 or omega_rad_s == 0:
+        return 1.0, tau_s
+    x = omega_rad_s * tau_s
+    return 1.0 / math.sqrt(1.0 + x * x), math.atan(x) / omega_rad_s
+
+
+def _servo_path(timeline, t, axis, tau, model):
+    """Commanded axis path through the servo, and the delay of each block's span."""
+    if model == "pure_lag":
+        return list(timeline.axis_path(t - tau, axis)), [(0.0, tau)]
+    centre = timeline.centre_m[axis]
+    p = [np.empty_like(t), np.empty_like(t), np.empty_like(t)]
+    # Each block's response holds from its start until the next block starts.
+    starts = [b.t_start_s for b in timeline.blocks[1:]]
+    edges = np.searchsorted(t, starts)
+    delays = []
+    for b, lo, hi in zip(timeline.blocks, [0, *edges], [*edges, t.size], strict=True):
+        gain, delay = servo_response(b.omega_rad_s, tau, model)
+        pos, vel, acc = timeline.axis_path(t[lo:hi] - delay, axis)
+        p[0][lo:hi] = centre + gain * (pos - centre)
+        p[1][lo:hi] = gain * vel
+        p[2][lo:hi] = gain * acc
+        delays.append((b.t_start_s, delay))
+    return p, delays
+
+
+def reversal_delays(times, delays):
+    """Delay of each reversal: that of the block span it falls in. [s]"""
+    starts = np.array([s for s, _ in delays])
+    k = np.clip(np.searchsorted(starts, times, side="right") - 1, 0, len(delays) - 1)
+    return np.array([d for _, d in delays])[k] if len(times) else np.asarray(times)
 
 
 def carriage_motion(timeline, machine, t):
@@ -34,10 +108,10 @@ def carriage_motion(timeline, machine, t):
     )
     paths = []
     for axis, (tau, lost, spike, vibration) in enumerate(per_axis):
-        p = list(timeline.axis_path(t - tau, axis))
+        p, delays = _servo_path(timeline, t, axis, tau, m.servo_model)
         if lost or spike or vibration:
             times, directions, initial = timeline.reversals(axis)
-            times = times + tau
+            times = times + reversal_delays(times, delays)
             add_backlash(p, t, times, directions, initial, lost, m.backlash_take_up_s)
             add_spikes(p, t, times, directions, spike, m.spike_tau_s)
             add_vibration(p, t, times, directions, vibration, m.vibration_hz, m.vibration_damping)

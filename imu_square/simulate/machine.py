@@ -27,8 +27,9 @@ A machine file (all sections optional; absent = ideal)::
     yaw_y = false
 
     [servo_mismatch]
-    tau_x_ms = 0.0                # pure time lag of each axis
+    tau_x_ms = 0.0                # servo time constant of each axis
     tau_y_ms = 0.0
+    model = "pure_lag"            # or "first_order": 1/(1 + s tau), shrinks the circle
 
     [backlash]
     x_um = 0.0
@@ -59,6 +60,7 @@ from dataclasses import dataclass, field
 from imu_square.errors import ConfigError, ImuSquareWarning
 from imu_square.simulate.config import Sections, load_toml
 from imu_square.simulate.geometry import Geometry
+from imu_square.simulate.kinematics import SERVO_MODELS
 from imu_square.simulate.trajectory import RAMP_PROFILES
 from imu_square.units import HOUR, MS, UM
 
@@ -78,7 +80,10 @@ class MachineModel:
     ramp_profile : str
         ``"trapezoid"`` or ``"s_curve"``.
     tau_x_s, tau_y_s : float
-        Servo lag of each axis. [s]
+        Servo time constant of each axis: its lag for a pure lag. [s]
+    servo_model : str
+        ``"pure_lag"`` or ``"first_order"``
+        (:mod:`imu_square.simulate.kinematics`).
     backlash_x_m, backlash_y_m : float
         Lost motion of each axis. [m]
     backlash_take_up_s : float
@@ -104,6 +109,7 @@ class MachineModel:
     ramp_profile: str = "trapezoid"
     tau_x_s: float = 0.0
     tau_y_s: float = 0.0
+    servo_model: str = "pure_lag"
     backlash_x_m: float = 0.0
     backlash_y_m: float = 0.0
     backlash_take_up_s: float = 0.005
@@ -141,7 +147,11 @@ class MachineModel:
                 "yaw_y": g.yaw_y,
             }
         if self.tau_x_s or self.tau_y_s:
-            out["servo_mismatch"] = {"tau_x_s": self.tau_x_s, "tau_y_s": self.tau_y_s}
+            out["servo_mismatch"] = {
+                "tau_x_s": self.tau_x_s,
+                "tau_y_s": self.tau_y_s,
+                "model": self.servo_model,
+            }
         if self.backlash_x_m or self.backlash_y_m:
             out["backlash"] = {
                 "backlash_x_m": self.backlash_x_m,
@@ -192,7 +202,7 @@ _LAYOUT = {
         "yaw_x": False,
         "yaw_y": False,
     },
-    "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0},
+    "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0, "model": "pure_lag"},
     "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0},
     "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0},
     "structural_vibration": {
@@ -286,6 +296,7 @@ def machine_from_mapping(doc, source="<machine>"):
         ramp_profile=s.choice("machine", "ramp_profile", RAMP_PROFILES),
         tau_x_s=s.number("servo_mismatch", "tau_x_ms", MS, 0.0, 1e3),
         tau_y_s=s.number("servo_mismatch", "tau_y_ms", MS, 0.0, 1e3),
+        servo_model=s.choice("servo_mismatch", "model", SERVO_MODELS),
         backlash_x_m=s.number("backlash", "x_um", UM, 0.0, 1e3),
         backlash_y_m=s.number("backlash", "y_um", UM, 0.0, 1e3),
         backlash_take_up_s=s.number("backlash", "take_up_ms", MS, 0.0, 1e3, lo_open=True),

@@ -25,7 +25,14 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   enter as a shear, as the squareness does;
 - ``eps_c_rad``: sensor mounting rotation; ``carriage_yaw_rad``: the
   carriage's yaw at the circle centre (associated yaw), which adds to it;
-- ``servo_mismatch_rad = omega (tau_y - tau_x)``;
+- ``servo_mismatch_rad``: the servos' phase mismatch on the circle,
+  ``omega (tau_y - tau_x)`` for pure lags, ``atan(omega tau_y) - atan(omega
+  tau_x)`` for first-order servos;
+- ``servo_amplitude_phase_rad``: the apparent ``theta_y - theta_x`` that
+  first-order servos add by shrinking each axis's amplitude by its own
+  ``1 / sqrt(1 + (omega tau)^2)``, seen through sensor axes turned by
+  ``eps_c``: about ``(A_x - A_y) / A sin(2 eps_c)``, the same in both
+  directions (0 for pure lags); included in ``expected_squareness_rad``;
 - ``gravity_phase_rad``: the apparent ``theta_y - theta_x`` that gravity
   coupling adds (position-angle domain, the same in both directions);
 - ``expected_squareness_gravity_free_rad``: ``expected_squareness_rad``
@@ -35,7 +42,8 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   (:func:`gravity_coupling_rad_per_m`);
 - ``feeds``: per feed, in the program's order, ``feed_mm_per_min``,
   ``omega_rad_s``, ``amplitude_m_s2``, ``servo_mismatch_rad``,
-  ``gravity_phase_rad`` and ``expected_squareness_rad``; the top-level keys
+  ``servo_amplitude_phase_rad``, ``gravity_phase_rad`` and
+  ``expected_squareness_rad``; the top-level keys
   of the same names are the first feed's;
 - ``omega_rad_s``, ``amplitude_m_s2 = v^2/r``, ``sample_rate_hz``,
   ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``;
@@ -58,6 +66,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from imu_square.simulate.kinematics import servo_response
 from imu_square.units import G
 
 # Keys an earlier release wrote, each with the key that replaces it. They are
@@ -81,11 +90,48 @@ def _gravity_phases(program, machine):
     return theta_x, theta_y
 
 
-def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics):
+def servo_gains(machine, omega_rad_s):
+    """Each axis's amplitude gain through its servo on the circle (1 for pure lags)."""
+    return tuple(
+        servo_response(omega_rad_s, tau, machine.servo_model)[0]
+        for tau in (machine.tau_x_s, machine.tau_y_s)
+    )
+
+
+def servo_amplitude_phase(omega_rad_s, tau_x_s, tau_y_s, eps_c_rad, model="first_order"):
+    """Apparent ``theta_y - theta_x`` from the servos' amplitude mismatch alone.
+
+    Axis amplitudes ``g_x``, ``g_y`` seen through sensor axes turned by ``eps_c``:
+    ``tan theta_x = (g_y / g_x) tan eps_c`` and ``tan theta_y = (g_x / g_y) tan eps_c``,
+    so ``theta_y - theta_x ~ (g_x - g_y) sin(2 eps_c)``, the same in both directions.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Angular speed of the circle. [rad/s]
+    tau_x_s, tau_y_s : float
+        Servo time constants. [s]
+    eps_c_rad : float
+        Sensor rotation about Z. [rad]
+    model : {"pure_lag", "first_order"}
+        Servo model (:mod:`imu_square.simulate.kinematics`).
+
+    Returns
+    -------
+    float
+        [rad]
+    """
+    gx = servo_response(omega_rad_s, tau_x_s, model)[0]
+    gy = servo_response(omega_rad_s, tau_y_s, model)[0]
+    t = math.tan(eps_c_rad)
+    return math.atan2(gx * t, gy) - math.atan2(gy * t, gx)
+
+
+def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics, gains=(1.0, 1.0)):
     """``theta_y - theta_x`` of the linearised circle, exact in the rotation ``eps``.
 
     ``harmonics`` (circle minus local squareness) enters as a shear, as the
-    squareness does.
+    squareness does; ``gains`` are the axes' servo amplitude gains.
     """
     beta, t_mean = alpha_beta_t
     cx, cy = program.centre_m
@@ -94,6 +140,7 @@ def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics):
     kxx, kxy, kyx, kyy = machine.tilt_per_m
     q = G * program.radius_m / program.centripetal_m_s2
     m = np.array([[1.0 + jxx - q * kxx, jxy - q * kxy], [jyx - q * kyx, 1.0 + jyy - q * kyy]])
+    m = m @ np.diag(gains)  # each axis's servo scales its own motion
     c, s = math.cos(eps), math.sin(eps)
     n = np.array([[c, s], [-s, c]]) @ m
     ny = -math.sin(beta) * n[0] + math.cos(beta) * n[1]
@@ -130,15 +177,30 @@ def gravity_coupling_rad_per_m(machine, eps_rad):
 def _feed_truth(program, machine, beta_t, eps, harmonics):
     """The quantities that depend on the feed, for a one-feed program."""
     theta_gx, theta_gy = _gravity_phases(program, machine)
+    omega = program.omega_rad_s
+    delay_x, delay_y = (
+        servo_response(omega, tau, machine.servo_model)[1]
+        for tau in (machine.tau_x_s, machine.tau_y_s)
+    )
+    expected = _exact_theta_diff(
+        program, machine, beta_t, eps, harmonics, servo_gains(machine, omega)
+    )
+    without = _exact_theta_diff(program, machine, beta_t, eps, harmonics)
     return {
         "feed_mm_per_min": program.feed_m_per_s * 6e4,
-        "omega_rad_s": program.omega_rad_s,
+        "omega_rad_s": omega,
         "amplitude_m_s2": program.centripetal_m_s2,
-        "servo_mismatch_rad": program.omega_rad_s * (machine.tau_y_s - machine.tau_x_s),
+        "servo_mismatch_rad": omega * (delay_y - delay_x),
+        "servo_amplitude_phase_rad": expected - without,
         "gravity_phase_rad": theta_gy - theta_gx,
-        "expected_squareness_rad": _exact_theta_diff(program, machine, beta_t, eps, harmonics)
-        + 0.0,
+        "expected_squareness_rad": expected + 0.0,
     }
+
+
+def _servo_delay_at(timeline, t_s, tau_s, model):
+    """The servo's delay on the block that holds ``t_s`` (its feed sets it). [s]"""
+    block = next((b for b in timeline.blocks if t_s <= b.t_end_s), timeline.blocks[-1])
+    return servo_response(block.omega_rad_s, tau_s, model)[1]
 
 
 def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s=0.0):
@@ -200,7 +262,10 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
     reversals = {}
     for axis, name, tau in ((0, "x", machine.tau_x_s), (1, "y", machine.tau_y_s)):
         times, _, _ = timeline.reversals(axis)
-        reversals[name] = [(t + tau) * clock_factor for t in times]
+        reversals[name] = [
+            (t + _servo_delay_at(timeline, t, tau, machine.servo_model)) * clock_factor
+            for t in times
+        ]
     local = float(geometry.local_machine_squareness(cx, cy, t_mean)) + 0.0
     circle = float(geometry.circle_squareness(cx, cy, program.radius_m, t_mean)) + 0.0
     yaw = float(geometry.carriage_yaw(cx, cy))
@@ -214,7 +279,15 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
     expected = first["expected_squareness_rad"]
     level = replace(machine, tilt_per_m=(0.0, 0.0, 0.0, 0.0))
     gravity_free = (
-        _exact_theta_diff(program.at_feed(0), level, (beta, t_mean), eps, harmonics) + 0.0
+        _exact_theta_diff(
+            program.at_feed(0),
+            level,
+            (beta, t_mean),
+            eps,
+            harmonics,
+            servo_gains(machine, first["omega_rad_s"]),
+        )
+        + 0.0
     )
     return {
         "machine_squareness_rad": alpha,
@@ -227,6 +300,7 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         "expected_squareness_gravity_free_rad": gravity_free,
         "gravity_coupling_rad_per_m": gravity_coupling_rad_per_m(machine, eps),
         "servo_mismatch_rad": first["servo_mismatch_rad"],
+        "servo_amplitude_phase_rad": first["servo_amplitude_phase_rad"],
         "gravity_phase_rad": first["gravity_phase_rad"],
         "omega_rad_s": first["omega_rad_s"],
         "amplitude_m_s2": first["amplitude_m_s2"],

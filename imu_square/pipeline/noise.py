@@ -1,0 +1,345 @@
+"""The noise the fitted model leaves, its spectrum, and the bound it sets.
+
+The noise floor of a run is the Cramér-Rao bound on ``theta_y - theta_x``
+for the noise *at the circle frequency*: a sinusoid's phase, fitted over a
+time ``T`` in stationary Gaussian noise of one-sided PSD ``S(f)``, has at
+least the variance ``S(f0) / (A^2 T)`` per axis (for long ``T``), so
+
+    sd(theta_y - theta_x) >= sqrt(2 S(f0)) / (A sqrt(T)),
+
+which is ``sqrt(2) d / (A sqrt(T))`` for white noise of density ``d``
+(``docs/model.md``). A MEMS sensor's noise also has a 1/f part: with the
+simulator's model ``S(f) = d^2 (1 + f_k / f)`` (:mod:`imu_square.simulate.noise`,
+corner ``f_k``) the bound grows by ``sqrt(1 + f_k / f0)``: twice the white
+bound for the paper's 0.16 Hz circle and a 0.5 Hz corner.
+:func:`squareness_noise_floor` gives it for a planned test;
+:func:`noise_floor` estimates it from a run:
+
+- the residual: the raw samples of the analysed cycles minus the fitted
+  model at their position angle (each direction's sinusoid, with the
+  low-pass's gain taken out, plus what its averaged cycle holds beyond the
+  sinusoid), so that neither the circle nor its harmonics count as noise,
+  whatever the circle frequency (a fixed 4 Hz high-pass at a 2.5 Hz circle
+  kept a third of the signal and reported a floor 300 times too high);
+- the white density from its median absolute deviation over all its
+  bandwidth (robust to spikes), corrected for the share of each sample's own
+  noise that the averaged cycle it is compared with holds (1 % for 15 cycles
+  at the default cutoff, 5 % for 3);
+- the 1/f corner from its Welch spectrum below half the cutoff, by a Whittle
+  fit of ``a + b / f``, kept only where ``b`` exceeds three times its standard
+  error (a white sensor then gets exactly the white bound).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from imu_square.pipeline.filter import design_lowpass
+from imu_square.pipeline.uncertainty import cramer_rao
+
+_MAD_TO_SD = 1.4826
+# Welch segments span this many circle periods (resolution a quarter of the circle
+# frequency); shorter stretches give no 1/f estimate below one period.
+_SEGMENT_PERIODS = 4
+# The 1/f term counts when it exceeds this many standard errors.
+_FLICKER_SIGNIFICANCE = 3.0
+
+
+@dataclass(frozen=True)
+class NoiseSpectrum:
+    """Sensor noise per axis: one-sided PSD ``d^2 (1 + f_k / f)``.
+
+    Attributes
+    ----------
+    white_density_m_s2_rthz : float
+        White density ``d``. [m/s^2/sqrt(Hz)]
+    flicker_corner_hz : float
+        1/f corner ``f_k``; 0 for white noise. [Hz]
+    """
+
+    white_density_m_s2_rthz: float
+    flicker_corner_hz: float = 0.0
+
+    def density_at(self, frequency_hz):
+        """Amplitude spectral density at ``frequency_hz``. [m/s^2/sqrt(Hz)]
+
+        Parameters
+        ----------
+        frequency_hz : float
+            Frequency, e.g. the circle's. [Hz]
+        """
+        corner = self.flicker_corner_hz if np.isfinite(self.flicker_corner_hz) else 0.0
+        return float(self.white_density_m_s2_rthz * np.sqrt(1.0 + corner / frequency_hz))
+
+
+def squareness_noise_floor(spectrum, amplitude_m_s2, analysed_s, circle_frequency_hz):
+    """Least standard deviation of ``theta_y - theta_x`` for a test in this noise.
+
+    Parameters
+    ----------
+    spectrum : NoiseSpectrum
+        The sensor's noise.
+    amplitude_m_s2 : float
+        ``v^2/r``. [m/s^2]
+    analysed_s : float
+        Analysed time, both directions together. [s]
+    circle_frequency_hz : float
+        ``v / (2 pi r)``. [Hz]
+
+    Returns
+    -------
+    float
+        ``sqrt(2) S(f0)^(1/2) / (A sqrt(T))``. [rad]
+    """
+    density = spectrum.density_at(circle_frequency_hz)
+    return cramer_rao(density, amplitude_m_s2, analysed_s)
+
+
+def model_residual(filtered, segmentation, cycles, mean_fit):
+    """Raw samples of the analysed cycles minus the fitted model, stretch by stretch.
+
+    Parameters
+    ----------
+    filtered : FilteredRecording
+        The samples (raw, valid).
+    segmentation : Segmentation
+        Blocks and the time-to-angle map.
+    cycles : CycleTraces
+        The cycles kept.
+    mean_fit : MeanFit
+        Fits of the directions' averaged cycles.
+
+    Returns
+    -------
+    list of ndarray, shape (n_i, 2)
+        x and y residuals of each run of consecutive valid samples. [m/s^2]
+    """
+    grid = cycles.phi_grid
+    period = segmentation.period_s
+    blocks = {b.plan.index: b for b in segmentation.blocks}
+    t_s, raw, valid = filtered.t_s, filtered.raw, filtered.valid
+    out = []
+    for i, cyc in enumerate((cycles.ccw, cycles.cw)):
+        params = [mean_fit.fit.x.params[i], mean_fit.fit.y.params[i]]
+        means = [mean_fit.mean_x[i], mean_fit.mean_y[i]]
+        has = mean_fit.counts[i] > 0
+        remainders = []
+        for p, m in zip(params, means, strict=True):
+            rem = m - (p[0] + p[1] * np.cos(grid) + p[2] * np.sin(grid))
+            remainders.append(np.interp(grid, grid[has], rem[has], period=2 * np.pi))
+        for b, t0 in _spans(cyc, period):
+            block = blocks[b]
+            lo, hi = np.searchsorted(t_s, t0)
+            phi = segmentation.phi(block, t_s[lo:hi])
+            c, s = np.cos(phi), np.sin(phi)
+            res = np.empty((hi - lo, 2))
+            for axis, (p, rem) in enumerate(zip(params, remainders, strict=True)):
+                model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
+                model += np.interp(np.mod(phi, 2 * np.pi), grid, rem, period=2 * np.pi)
+                res[:, axis] = raw[lo:hi, axis] - model
+            ok = valid[lo:hi]
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+            out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
+    return out
+
+
+def _spans(cyc, period):
+    """(block, (start, end)) of each run of consecutive kept cycles. [s]"""
+    order = np.lexsort((cyc.t_start_s, cyc.block))
+    spans = []
+    for k in order:
+        b, t0 = int(cyc.block[k]), float(cyc.t_start_s[k])
+        if spans and spans[-1][0] == b and abs(spans[-1][1][1] - t0) < 0.01 * period:
+            spans[-1] = (b, (spans[-1][1][0], t0 + period))
+        else:
+            spans.append((b, (t0, t0 + period)))
+    return spans
+
+
+def white_density(residuals, sample_rate_hz):
+    """White-noise density from the median absolute deviation of the residual.
+
+    Parameters
+    ----------
+    residuals : list of ndarray, shape (n_i, n_axes)
+        Residual stretches. [m/s^2]
+    sample_rate_hz : float
+        Sample rate. [Hz]
+
+    Returns
+    -------
+    float
+        RMS over the axes of ``sd / sqrt(fs / 2)``; an overestimate where the
+        data hold vibration the model does not. [m/s^2/sqrt(Hz)]
+    """
+    r = np.concatenate(residuals)
+    sd = _MAD_TO_SD * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+    return float(np.sqrt(np.mean(sd**2) / (sample_rate_hz / 2)))
+
+
+def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz):
+    """1/f corner of the residual's spectrum, by a Whittle fit of ``a + b / f``.
+
+    Parameters
+    ----------
+    residuals : list of ndarray, shape (n_i, n_axes)
+        Residual stretches. [m/s^2]
+    sample_rate_hz : float
+        Sample rate. [Hz]
+    circle_frequency_hz : float
+        Circle frequency, which sets the resolution needed. [Hz]
+    max_frequency_hz : float
+        Highest frequency fitted (below the low-pass's cutoff, where the
+        model has removed every periodic part). [Hz]
+
+    Returns
+    -------
+    float
+        ``b / a`` if ``b`` exceeds :data:`_FLICKER_SIGNIFICANCE` standard
+        errors, else 0; NaN when no stretch spans a circle period. [Hz]
+    """
+    longest = max(r.shape[0] for r in residuals)
+    want = _SEGMENT_PERIODS * sample_rate_hz / circle_frequency_hz
+    nperseg = 1 << int(np.floor(np.log2(max(min(want, longest), 2))))
+    if nperseg < sample_rate_hz / circle_frequency_hz:
+        return float("nan")
+    total, n_avg = 0.0, 0
+    for r in residuals:
+        if r.shape[0] < nperseg:
+            continue
+        f, p = signal.welch(r, fs=sample_rate_hz, nperseg=nperseg, axis=0)
+        k = 1 + (r.shape[0] - nperseg) // (nperseg // 2)
+        total = total + k * p.sum(axis=1)
+        n_avg += k * r.shape[1]
+    psd = total / n_avg
+    band = (f >= 2 * f[1]) & (f <= max_frequency_hz)
+    if np.count_nonzero(band) < 4:
+        return float("nan")
+    f, psd = f[band], psd[band]
+    design = np.column_stack([np.ones_like(f), 1 / f])
+    coef = np.array([np.median(psd), 0.0])
+    for _ in range(20):  # Whittle: least squares weighted by the model's inverse variance
+        model = np.maximum(design @ coef, 1e-6 * coef[0])
+        w = 1 / model**2
+        coef = np.linalg.solve(design.T @ (design * w[:, None]), design.T @ (w * psd))
+    model = np.maximum(design @ coef, 1e-6 * abs(coef[0]))
+    cov = np.linalg.inv(design.T @ (design * (n_avg / model**2)[:, None]))
+    if coef[0] <= 0 or coef[1] < _FLICKER_SIGNIFICANCE * np.sqrt(cov[1, 1]):
+        return 0.0
+    return float(coef[1] / coef[0])
+
+
+def mean_removal_factor(cutoff_hz, order, sample_rate_hz, n_cycles):
+    """Residual noise variance over the sensor's, after the averaged cycle is taken out.
+
+    A sample ``e`` minus the low-passed mean of ``n`` cycles (itself among
+    them) keeps ``1 - (2 h_0 - sum h^2) / n`` of its variance, with ``h``
+    the forward-backward filter's impulse response: ``h_0`` and ``sum h^2``
+    are the integrals of ``|H|^2`` and ``|H|^4`` over ``fs / 2``.
+
+    Parameters
+    ----------
+    cutoff_hz : float
+        Cutoff of the designed filter. [Hz]
+    order : int
+        Order of the designed filter.
+    sample_rate_hz : float
+        Sample rate. [Hz]
+    n_cycles : float
+        Cycles averaged.
+
+    Returns
+    -------
+    float
+    """
+    sos = design_lowpass(cutoff_hz, order, sample_rate_hz)
+    f, h = signal.sosfreqz(sos, worN=1 << 14, fs=sample_rate_hz)
+    g = np.abs(h) ** 2
+    h0 = np.trapezoid(g, f) / (sample_rate_hz / 2)
+    h2 = np.trapezoid(g**2, f) / (sample_rate_hz / 2)
+    return float(1.0 - (2 * h0 - h2) / n_cycles)
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """The noise floor of one run.
+
+    Attributes
+    ----------
+    noise_density_m_s2_rthz : float
+        White density used for the bound: the sensor's stated one if known,
+        else :attr:`residual_density_m_s2_rthz`. [m/s^2/sqrt(Hz)]
+    source : str
+        ``"sensor"`` (the recording states it) or ``"residual"`` (estimated).
+    residual_density_m_s2_rthz : float
+        White density of what the fitted model leaves, whatever the source. [m/s^2/sqrt(Hz)]
+    flicker_corner_hz : float
+        1/f corner of what the model leaves: 0 when not significant, NaN when
+        the stretches are too short to tell. [Hz]
+    circle_density_m_s2_rthz : float
+        Noise density at the circle frequency, 1/f included. [m/s^2/sqrt(Hz)]
+    analysed_s : float
+        Time of data in the analysed cycles, both directions, gaps excluded. [s]
+    crb_rad : float
+        Cramér-Rao bound on ``theta_y - theta_x`` at :attr:`circle_density_m_s2_rthz`. [rad]
+    crb_white_rad : float
+        The same for the white density alone. [rad]
+    """
+
+    noise_density_m_s2_rthz: float
+    source: str
+    residual_density_m_s2_rthz: float
+    flicker_corner_hz: float
+    circle_density_m_s2_rthz: float
+    analysed_s: float
+    crb_rad: float
+    crb_white_rad: float
+
+
+def noise_floor(filtered, segmentation, cycles, mean_fit, sensor):
+    """Noise density, its 1/f corner and the Cramér-Rao bound of one run.
+
+    Parameters
+    ----------
+    filtered : FilteredRecording
+        The samples, raw and low-passed.
+    segmentation : Segmentation
+        The blocks found.
+    cycles : CycleTraces
+        The cycles kept.
+    mean_fit : MeanFit
+        Fits of the directions' averaged cycles.
+    sensor : SensorInfo
+        What the recording says of the sensor.
+
+    Returns
+    -------
+    NoiseFloor
+    """
+    fs = filtered.sample_rate_hz
+    f0 = 1.0 / segmentation.period_s
+    residuals = model_residual(filtered, segmentation, cycles, mean_fit)
+    n = 0.5 * (cycles.ccw.n + cycles.cw.n)
+    kept = mean_removal_factor(filtered.cutoff_hz, filtered.order, fs, n)
+    residual = white_density(residuals, fs) / np.sqrt(kept)
+    corner = flicker_corner(residuals, fs, f0, min(filtered.cutoff_hz / 2, fs / 4))
+    stated = sensor.noise_density_m_s2_rthz
+    if np.isfinite(stated) and stated > 0:
+        density, source = float(stated), "sensor"
+    else:
+        density, source = residual, "residual"
+    spectrum = NoiseSpectrum(density, corner)
+    held = sum(np.count_nonzero(c.valid) for c in (cycles.ccw, cycles.cw))
+    analysed_s = held / cycles.phi_grid.size * segmentation.period_s
+    amplitude = mean_fit.amplitude_m_s2
+    return NoiseFloor(
+        noise_density_m_s2_rthz=density,
+        source=source,
+        residual_density_m_s2_rthz=residual,
+        flicker_corner_hz=corner,
+        circle_density_m_s2_rthz=spectrum.density_at(f0),
+        analysed_s=analysed_s,
+        crb_rad=squareness_noise_floor(spectrum, amplitude, analysed_s, f0),
+        crb_white_rad=cramer_rao(density, amplitude, analysed_s),
+    )
