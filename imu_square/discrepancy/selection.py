@@ -48,6 +48,8 @@ COARSE_STEP = 3
 REFIT_SLACK = 10.0
 # At each step the best few candidates by screening are refitted; the best refit is added.
 REFIT_TOP = 3
+# ... those whose screening statistic is at least this fraction of the best's.
+COMPETITIVE = 0.25
 # Grid points of the scan of a candidate with a single identifiable size.
 SCAN_POINTS = 13
 # A size is identifiable when its whole physical range moves the fit vector by
@@ -353,7 +355,7 @@ def _refit(problem, outcome, screen, starts):
         state = _with_shape(outcome.state, params, screen.shape)
         for p, v in zip(screen.informative, coef, strict=True):
             state = p.set(state, float(v))
-        new = problem.fit(state, list(outcome.params) + screen.informative + shapes)
+        new = problem.fit(state, list(outcome.params) + screen.informative + shapes, max_nfev=6)
         if best is None or new.rss < best.rss:
             best = new
     return best, shapes
@@ -487,16 +489,20 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
     steps = []
     crit_sep = float(stats.chi2.isf(alpha_separation, 1))
     fresh = False
+    screened_at = None
     while remaining and len(steps) < max_steps:
         for e in remaining:
             screener.rescreen(screens[e], outcome, fresh)
-        fresh = True
+        fresh, screened_at = True, outcome
         threshold = alpha / len(remaining)
         ranked = sorted(remaining, key=lambda e: (screens[e].p_adjusted, -screens[e].lr))
+        top_lr = max(screens[e].lr for e in ranked[:1])
         promising = [
             e
             for e in ranked[:REFIT_TOP]
-            if screens[e].dof and screens[e].p_adjusted <= REFIT_SLACK * threshold
+            if screens[e].dof
+            and screens[e].p_adjusted <= REFIT_SLACK * threshold
+            and screens[e].lr >= COMPETITIVE * top_lr
         ]
         if not promising:
             break
@@ -541,7 +547,7 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         remaining.remove(best)
         remaining += [e for e in dropped if e not in remaining]
         outcome = after
-    if steps:
+    if screened_at is not outcome:
         for e in remaining:
-            screener.rescreen(screens[e], outcome, fresh=True)
+            screener.rescreen(screens[e], outcome, fresh=bool(steps))
     return steps, outcome, screens

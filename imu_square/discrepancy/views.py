@@ -38,10 +38,10 @@ harmonic of the pipeline's 4 Hz low-pass, at least 10):
     constant: ``n - 1`` components per direction and number, so a drift
     across cycles or runs shows, a constant misfit does not.
 ``timing``
-    The common phase of x and y at the circle frequency, cycle by cycle
-    (from the recording's own phase of each cycle, whitened in each block):
-    the arrival of each cycle against the program's clock (a period that
-    drifts, a clock error).
+    The phase of x and of y at the circle frequency, cycle by cycle (from
+    the recording's own phase of each cycle, whitened in each block): the
+    arrival of each cycle against the program's clock (a period that
+    drifts, a clock error, moves both).
 ``band``
     Harmonics above ``Kt`` up to ``K`` of each block's averaged traces, in
     octaves of harmonics; the view's gap is the largest octave's, and its
@@ -179,10 +179,11 @@ class FeatureSpace:
         self._timing_ref = ref
         self._timing_white = []
         for b, idx in enumerate(self._cycles):
-            # common phase (theta_x + theta_y) / 2, theta_a = Re(i dc / ref): var (cov/2) / |ref|^2
+            # each axis's phase theta_a = Re(i dc / ref): its variance is (cov / 2) / |ref|^2
             mag2 = np.mean(np.abs(ref[idx]) ** 2, axis=0)
-            cov = 0.25 * (self._cov1[b, 0] / mag2[0] + self._cov1[b, 1] / mag2[1])
-            self._timing_white.append(np.linalg.inv(np.linalg.cholesky(cov)))
+            self._timing_white.append(
+                [np.linalg.inv(np.linalg.cholesky(self._cov1[b, a] / mag2[a])) for a in range(2)]
+            )
         lo = self.k_trace + 1
         self._octaves = []
         while lo <= k_max:
@@ -267,10 +268,14 @@ class FeatureSpace:
             c = f.cycle[idx, a, kk]
             trend += [m @ c.real] if kk == 0 else [m @ c.real, m @ c.imag]
         out["trend"] = [np.concatenate(trend) if trend else np.empty(0)]
-        theta = 0.5 * (1j * f.cycle[:, :, 1] / self._timing_ref).real.sum(axis=1)
+        theta = (1j * f.cycle[:, :, 1] / self._timing_ref).real
         out["timing"] = [
             np.concatenate(
-                [w @ theta[idx] for w, idx in zip(self._timing_white, self._cycles, strict=True)]
+                [
+                    w[a] @ theta[idx, a]
+                    for w, idx in zip(self._timing_white, self._cycles, strict=True)
+                    for a in range(2)
+                ]
             )
         ]
         out["band"] = [

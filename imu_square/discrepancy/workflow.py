@@ -45,8 +45,10 @@ from imu_square.simulate.presets import EFFECTS, parse_effects
 from imu_square.simulate.sensor import SensorModel
 from imu_square.units import G
 
-# An unexplained gap larger than this in a view is reported in the notes.
-GAP_NOTE = 1.2
+# A view whose p-value with the final model is below this is reported in the notes.
+GAP_NOTE_P = 1e-3
+# The noise floor is estimated again from the residual when its variance moved more.
+NOISE_CHANGE = 0.05
 
 
 @dataclass(frozen=True)
@@ -264,8 +266,8 @@ def _residual_noise(problem, recording, outcome):
     Returns
     -------
     NoiseModel or None
-        None when it agrees with the current estimate within five standard
-        deviations of the scatter (and 2 %).
+        None when its variance agrees with the current estimate within five
+        standard deviations of the scatter or :data:`NOISE_CHANGE`.
     """
     model = problem.model
     layout = model.layout
@@ -273,7 +275,7 @@ def _residual_noise(problem, recording, outcome):
     spectra = model.operator.cycle_spectra(residual)
     new = estimate_noise(spectra, layout, recording.sample_rate_hz, recording.duration_s)
     old = problem.space.noise
-    tol = 5 * math.sqrt(2 / max(new.dof, 1)) + 0.02
+    tol = max(5 * math.sqrt(2 / max(new.dof, 1)), NOISE_CHANGE)
     if np.all(np.abs(new.sigma2 / old.sigma2 - 1) <= tol):
         return None
     return new
@@ -406,7 +408,7 @@ def find_discrepancy(recording, options=None, program=None):
         for p in s.fixed
     )
     state = _clip_to_range(state, steps_in, notes)
-    left = [k for k, v in final_gap.items() if math.isfinite(v.gap) and v.gap > GAP_NOTE]
+    left = [k for k, v in final_gap.items() if math.isfinite(v.gap) and v.p_value < GAP_NOTE_P]
     if left:
         notes.append(
             "a gap above the noise floor is left in "
