@@ -219,7 +219,8 @@ def test_the_written_model_reproduces_the_recording_in_imu_square_simulate(tmp_p
         sd = math.sqrt(2 * (nu + 2 * excess)) / nu
         if view != "band":
             assert abs(a["gap"] ** 2 - b["gap"] ** 2) < 5 * sd, view
-        assert first["final_gap"][view] < 1.3 and second["final_gap"][view] < 1.3
+        for doc in (first, second):  # the final model explains each down to the noise
+            assert doc["views"]["final"][view]["p_value"] > 1e-3, view
 
 
 def _independent_circle_csv(path, tau_x_s, tau_y_s, fs=200.0, seed=5):

@@ -209,8 +209,7 @@ class _Experiment:
         on = state
         for p, v in zip(member.sizes, member.values, strict=True):
             on = p.set(on, float(v))
-        base_f = self.problem.model_features(on)
-        cols = self.problem.columns(on, params, at=base_f)
+        cols = self.problem.columns(on, params)
         jac = np.column_stack([self.problem.space.fit_vector(c) for c in cols])
         signal = jac[:, : len(member.sizes)] @ member.values
         return jac, signal
@@ -248,7 +247,7 @@ def _simulated_problem(problem, state, test):
     model = ForwardModel(sim_layout, operator)
     reference = model.features(state)
     space = FeatureSpace(sim_layout, operator, sim_noise, reference)
-    return Problem(model, space, reference), state
+    return Problem(model, space, model.samples(state)), state
 
 
 def suggest_tests(problem, final, members_by_group, alpha_separation, tests=EXTRA_TESTS):

@@ -15,13 +15,19 @@ Each step:
    whitened residual and ``P`` the projection on the derivatives with the
    current model's own derivatives projected out; under the null it is
    chi-square with as many degrees of freedom as identifiable sizes.
-2. The candidate with the smallest *adjusted* p-value ``G p`` (``G`` grid
-   points: Bonferroni over the shapes tried) is refitted with all effects so
-   far (:meth:`Problem.fit`: sizes and shapes free, flags held). Its
-   likelihood-ratio statistic is the drop of the residual sum of squares.
+2. The best few candidates by screening are refitted with all effects so
+   far (:meth:`Problem.fit`: sizes and shapes free, flags held; a single
+   size is first scanned on a grid). The likelihood-ratio statistic of each
+   is the drop of the residual sum of squares; its p-value is the larger of
+   that statistic's and of its sizes' Wald statistic's (the model's fit can
+   be short of its optimum on a staircase likelihood, and a refit would
+   credit the candidate with the rest), times ``G``, the shapes tried
+   (Bonferroni). The best refit is the step.
 3. It joins the model if its adjusted p-value is below ``alpha / m``
    (Bonferroni over the ``m`` candidates still out), ``alpha`` the stated
-   significance level (1 % by default); else the growth stops.
+   significance level (1 % by default); else the growth stops. Effects
+   added before that the new one makes redundant are dropped (a Wald test
+   on their sizes) and may be added again later.
 
 Candidates that explain the gap as well as the one added, within
 ``chi2.isf(alpha_separation, 1)`` of its statistic, cannot be told apart
@@ -31,7 +37,7 @@ fits each, so that the user sees every reading.
 
 import copy
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import linalg, stats
@@ -50,6 +56,9 @@ REFIT_SLACK = 10.0
 REFIT_TOP = 3
 # ... those whose screening statistic is at least this fraction of the best's.
 COMPETITIVE = 0.25
+# Trial refits take this many evaluations of the residual; the chosen one is then
+# refitted to convergence.
+TRIAL_NFEV = 2
 # Grid points of the scan of a candidate with a single identifiable size.
 SCAN_POINTS = 13
 # A size is identifiable when its whole physical range moves the fit vector by
@@ -164,12 +173,8 @@ class Screener:
         self.alpha = alpha
         self._basis = None
         space = problem.space
-        ones = Features(
-            np.zeros_like(problem.data.block),
-            np.zeros_like(problem.data.cycle),
-            problem.data.reversal,
-            problem.data.prior,
-        )
+        template = problem.model.operator.transform(np.zeros_like(problem.data_xy))
+        ones = replace(template, prior=np.zeros(problem.model.n_blocks))
         self.channel = []
         for a in range(2):
             blk = ones.block.copy()
@@ -187,12 +192,12 @@ class Screener:
         screen.p_value = float(stats.chi2.sf(screen.lr, screen.dof)) if screen.dof else 1.0
         screen.p_adjusted = min(1.0, screen.p_value * screen.grid_size)
 
-    def _directions(self, state, params, shape, f0):
+    def _directions(self, state, params, shape):
         sizes = [p for p in params if p.role == SIZE]
         s = _with_shape(state, params, shape)
         for p in sizes:
             s = p.set(s, 0.1 * p.declared.typical if p.declared.typical else p.step)
-        v = self.problem.space.fit_vector(self.problem.model.features(s) - f0)
+        v = self.problem.space.fit_vector(self.problem.change(state, s))
         return np.column_stack([v * self.channel[0], v * self.channel[1]])
 
     def _stage2(self, screen, outcome, params, q):
@@ -208,7 +213,7 @@ class Screener:
             screen.vectors = np.zeros((problem.space.fit_vector(outcome.residual).size, 0))
             screen.fixed = [p for p in params if p.role == SIZE]
             return
-        cols = problem.columns(state, sizes, at=problem.model_features(outcome.state))
+        cols = problem.columns(state, sizes)
         vec = np.column_stack([problem.space.fit_vector(c) for c in cols])
         m = _perp(q, vec)
         span = np.array([p.declared.high - p.declared.low for p in sizes]) / 2
@@ -230,13 +235,13 @@ class Screener:
             self._basis = (outcome, _orthonormal(outcome.jacobian))
         return self._basis[1]
 
-    def _scan(self, outcome, params, grid, f0, r, q):
+    def _scan(self, outcome, params, grid, r, q):
         """Directions of the grid points worth trying: every third, then the best's neighbours."""
         scored = {}
 
         def score(i):
             if i not in scored:
-                v = self._directions(outcome.state, params, grid[i], f0)
+                v = self._directions(outcome.state, params, grid[i])
                 scored[i] = (v, _lr(r, _perp(q, v))[0])
             return scored[i][1]
 
@@ -267,11 +272,10 @@ class Screener:
         params = effect_model_parameters(effect)
         grid = _shape_grid(params, problem.model.layout.dt_s**-1)
         screen = Screen(effect, grid[0], len(grid), [], [], np.zeros((0, 0)), [], inert=None)
-        f0 = problem.model_features(outcome.state)
         q = self._q(outcome)
         r = problem.space.fit_vector(outcome.residual)
         if len(grid) > 1:
-            screen.grid = self._scan(outcome, params, grid, f0, r, q)
+            screen.grid = self._scan(outcome, params, grid, r, q)
         screen.shape = self._best_shape(screen, r, q)
         self._stage2(screen, outcome, params, q)
         self._score(screen, r, q)
@@ -346,7 +350,7 @@ class Step:
     dropped: tuple = ()
 
 
-def _refit(problem, outcome, screen, starts):
+def _refit(problem, outcome, screen, starts, max_nfev=TRIAL_NFEV):
     """Refit with the candidate added, from each start of its sizes; the best fit."""
     params = effect_model_parameters(screen.effect)
     shapes = [p for p in params if p.role == SHAPE and not p.declared.is_flag]
@@ -355,7 +359,7 @@ def _refit(problem, outcome, screen, starts):
         state = _with_shape(outcome.state, params, screen.shape)
         for p, v in zip(screen.informative, coef, strict=True):
             state = p.set(state, float(v))
-        new = problem.fit(state, list(outcome.params) + screen.informative + shapes, max_nfev=6)
+        new = problem.fit(state, list(outcome.params) + screen.informative + shapes, max_nfev)
         if best is None or new.rss < best.rss:
             best = new
     return best, shapes
@@ -406,8 +410,23 @@ def _trial(problem, outcome, screen, first):
         starts = [np.array([_scan(problem, outcome, screen, starts, sd)])]
     fit, shapes = _refit(problem, outcome, screen, starts)
     lr = outcome.rss - fit.rss
-    p_adj = min(1.0, float(stats.chi2.sf(lr, screen.dof)) * screen.grid_size)
-    return p_adj, -lr, fit, shapes
+    return _p_adjusted(fit, screen, lr), -lr, fit, shapes
+
+
+def _p_adjusted(fit, screen, lr):
+    """The step's p-value: the larger of the likelihood ratio's and its sizes' Wald test's.
+
+    On a staircase likelihood the current model's fit is not exactly at its
+    optimum, and a refit with a candidate added also collects what the
+    other parameters had left: the likelihood ratio alone would credit the
+    candidate with it. Its own sizes must be significant too.
+    """
+    keys = [p.key for p in fit.params]
+    idx = [keys.index(p.key) for p in screen.informative]
+    theta = np.array([p.get(fit.state) for p in screen.informative])
+    wald = float(theta @ np.linalg.pinv(fit.cov[np.ix_(idx, idx)]) @ theta)
+    p = max(stats.chi2.sf(lr, screen.dof), stats.chi2.sf(wald, screen.dof))
+    return min(1.0, float(p) * screen.grid_size)
 
 
 def _wald_drop(problem, outcome, added, threshold):
@@ -518,6 +537,11 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         logger.debug(
             "step %d: %s LR %.1f (screen %.1f), p %.3g", len(steps) + 1, best, lr, sb.lr, p_adj
         )
+        if p_adj > REFIT_SLACK * threshold:
+            break
+        new = problem.fit(new.state, new.params)
+        lr = outcome.rss - new.rss
+        p_adj = _p_adjusted(new, sb, lr)
         if p_adj > threshold:
             break
         # look-alikes: candidates whose own refit explains the gap within crit_sep as well

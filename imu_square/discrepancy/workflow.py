@@ -253,7 +253,7 @@ def fit_base(recording, program, analysis=None, lap=None):
     )
     space = FeatureSpace(layout, operator, noise, data)
     model = ForwardModel(layout, operator)
-    problem = Problem(model, space, data)
+    problem = Problem(model, space, xy)
     lap("features")
     params = base_parameters(model.n_blocks)
     base = problem.fit(_initial_state(recording, run, noise, model.n_blocks), params)
@@ -271,7 +271,8 @@ def _residual_noise(problem, recording, outcome):
     """
     model = problem.model
     layout = model.layout
-    residual = recording.accel[layout.index, :2].astype(np.float64) - model.samples(outcome.state)
+    residual = problem.data_xy - model.samples(outcome.state)
+    np.clip(residual, -problem.clip, problem.clip, out=residual)
     spectra = model.operator.cycle_spectra(residual)
     new = estimate_noise(spectra, layout, recording.sample_rate_hz, recording.duration_s)
     old = problem.space.noise
@@ -339,10 +340,11 @@ def find_discrepancy(recording, options=None, program=None):
         # from cycle to cycle with the sample phase: the recording's scatter counted them
         # as noise, the model's residual does not
         logger.debug("noise floor re-estimated from the residual: %s", again.density_m_s2_rthz)
+        reference = problem.model.operator.transform(problem.data_xy)
         problem = Problem(
             problem.model,
-            FeatureSpace(problem.model.layout, problem.model.operator, again, problem.data),
-            problem.data,
+            FeatureSpace(problem.model.layout, problem.model.operator, again, reference),
+            problem.data_xy,
         )
         noise = again
         base = problem.fit(base.state, base_params)
