@@ -128,7 +128,7 @@ class Reference:
         machine, sensor = base_truth(np.random.default_rng(0))
         rec, _ = simulate_run(PROGRAM, machine, sensor, seed=1)
         self.problem, self.base, _ = fit_base(rec, PROGRAM)
-        screener = Screener(self.problem, SIGNIFICANCE)
+        screener = Screener(self.problem)
         self.screens = {e: screener.screen(e, self.base) for e in EFFECTS}
         q, _ = np.linalg.qr(self.base.jacobian)
         self.q = q

@@ -19,7 +19,13 @@ from imu_square.discrepancy import VIEWS, DiscrepancyOptions, find_discrepancy
 from imu_square.discrepancy.workflow import fit_base
 from imu_square.io.mcap import read_mcap, write_mcap
 from imu_square.program import TestProgram
-from imu_square.simulate import MachineModel, SensorModel, simulate_run, with_effects
+from imu_square.simulate import (
+    MachineModel,
+    SensorModel,
+    read_machine,
+    simulate_run,
+    with_effects,
+)
 from imu_square.units import UG
 
 PROGRAM = TestProgram(radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=4, dwell_s=1.0)
@@ -44,7 +50,7 @@ def run_cli(capsys, *argv):
 @pytest.mark.slow
 def test_views_of_clean_recordings_follow_their_null_distribution():
     """On clean recordings each view's p-value is uniform and its mean S / nu is 1."""
-    n = 40
+    n = 30
     p_values = {v: [] for v in VIEWS}
     ratios = {v: [] for v in VIEWS}
     dof = {}
@@ -221,6 +227,17 @@ def test_the_written_model_reproduces_the_recording_in_imu_square_simulate(tmp_p
             assert abs(a["gap"] ** 2 - b["gap"] ** 2) < 5 * sd, view
         for doc in (first, second):  # the final model explains each down to the noise
             assert doc["views"]["final"][view]["p_value"] > 1e-3, view
+
+
+def test_a_lag_of_x_is_written_as_a_lag_of_x(tmp_path, capsys):
+    """Only the mismatch is identifiable; the written lags are both within their range."""
+    path, _ = record(tmp_path, machine=MachineModel(tau_x_s=6e-3, tau_y_s=1e-3), seed=12)
+    model = tmp_path / "model"
+    code, out, _ = run_cli(capsys, path, "--json", "--model-out", model, "--no-suggest")
+    assert code == 1 and json.loads(out)["named_effects"] == ["servo_mismatch"]
+    machine = read_machine(model / "machine.toml")
+    assert machine.tau_y_s == 0.0
+    assert machine.tau_x_s == pytest.approx(5e-3, abs=0.6e-3)  # about 3 sd
 
 
 def _independent_circle_csv(path, tau_x_s, tau_y_s, fs=200.0, seed=5):

@@ -84,8 +84,6 @@ class Screen:
         Its sizes that are not identifiable here (held at zero).
     vectors : ndarray, shape (n, q)
         Fit-vector derivatives by the identifiable sizes.
-    columns : list of Features
-        The same derivatives as features.
     lr : float
         Linearised likelihood-ratio statistic at the last screening.
     dof : int
@@ -106,7 +104,6 @@ class Screen:
     informative: list
     fixed: list
     vectors: np.ndarray
-    columns: list
     lr: float = 0.0
     dof: int = 0
     p_value: float = 1.0
@@ -164,13 +161,10 @@ class Screener:
     ----------
     problem : Problem
         The recording and the forward model.
-    alpha : float
-        Significance level.
     """
 
-    def __init__(self, problem, alpha):
+    def __init__(self, problem):
         self.problem = problem
-        self.alpha = alpha
         self._basis = None
         space = problem.space
         template = problem.model.operator.transform(np.zeros_like(problem.data_xy))
@@ -209,7 +203,7 @@ class Screener:
         state = _with_shape(outcome.state, params, screen.shape)
         # the effect is off at the current model: its shape changes nothing yet
         if not sizes:
-            screen.informative, screen.columns = [], []
+            screen.informative = []
             screen.vectors = np.zeros((problem.space.fit_vector(outcome.residual).size, 0))
             screen.fixed = [p for p in params if p.role == SIZE]
             return
@@ -227,7 +221,6 @@ class Screener:
         if screen.inert is None:
             screen.inert = {p.key for p in screen.fixed}
         screen.vectors = vec[:, keep]
-        screen.columns = [cols[i] for i in keep]
 
     def _q(self, outcome):
         """Orthonormal basis of the current model's derivatives, once per fit."""
@@ -271,7 +264,7 @@ class Screener:
         problem = self.problem
         params = effect_model_parameters(effect)
         grid = _shape_grid(params, problem.model.layout.dt_s**-1)
-        screen = Screen(effect, grid[0], len(grid), [], [], np.zeros((0, 0)), [], inert=None)
+        screen = Screen(effect, grid[0], len(grid), [], [], np.zeros((0, 0)), inert=None)
         q = self._q(outcome)
         r = problem.space.fit_vector(outcome.residual)
         if len(grid) > 1:
@@ -495,7 +488,7 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
     screens : dict of str to Screen
         Every candidate's screen at the final model.
     """
-    screener = Screener(problem, alpha)
+    screener = Screener(problem)
     screens = {e: screener.screen(e, outcome) for e in candidates}
     first = {
         e: (list(s.informative), np.array(s.coef), np.array(s.cov)) for e, s in screens.items()

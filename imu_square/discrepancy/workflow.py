@@ -178,6 +178,11 @@ def _gauge(problem, outcome, steps):
         new = p.set(new, p.get(new) + float(dv))
     for p, dv in zip(fixed, d, strict=True):
         new = p.set(new, p.get(new) + float(dv))
+    for p in sizes:  # what SLSQP leaves a hair off a bound is on it
+        v, span = p.get(new), p.declared.high - p.declared.low
+        for bound in (p.declared.low, p.declared.high):
+            if abs(v - bound) < 1e-7 * span:
+                new = p.set(new, bound)
     if problem.rss(new) - outcome.rss > 0.1:
         return state
     return new
