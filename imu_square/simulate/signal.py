@@ -1,0 +1,159 @@
+"""The simulator's noise-free reading at any true times, stage by stage.
+
+:func:`~imu_square.simulate.simulate_run` samples the whole test on the
+sensor's clock and adds noise; a model fit (``imu_square.discrepancy``)
+needs the same physics at the sample times of a recording it compares with,
+many times over, often changing one parameter that touches one stage only.
+This module is that physics, the chain of ``simulate_run`` cut at its stages
+so a caller can keep the ones that did not change:
+
+1. :func:`axis_motion`: one axis's commanded path with its servo lag and the
+   drive effects at its reversals (backlash, friction spike, vibration);
+2. :meth:`Geometry.apply`: the geometric error map, both axes to the carriage;
+3. :func:`sense_motion`: gravity coupling, carriage yaw, the sensor's
+   mounting, non-orthogonality, gain and bias.
+
+:func:`sensed_signal` runs all three; it equals ``simulate_run``'s reading
+before noise, ADC steps and clipping, sample for sample (a test checks).
+"""
+
+import numpy as np
+
+from imu_square.simulate.drive import add_backlash, add_spikes, add_vibration
+from imu_square.simulate.kinematics import carriage_tilt
+from imu_square.simulate.trajectory import build_timeline
+
+
+def model_timeline(program, machine, lead_in_s=3.0, lead_out_s=3.0):
+    """The commanded timeline ``simulate_run`` builds for a program and machine.
+
+    Parameters
+    ----------
+    program : TestProgram
+        The test program.
+    machine : MachineModel
+        The machine (its feed ramps).
+    lead_in_s, lead_out_s : float
+        Idle time before the first and after the last block. [s]
+
+    Returns
+    -------
+    Timeline
+    """
+    return build_timeline(program, machine.ramp_s, machine.ramp_profile, lead_in_s, lead_out_s)
+
+
+def axis_parameters(machine, axis):
+    """What one axis's motion depends on besides the timeline: a hashable key.
+
+    Parameters
+    ----------
+    machine : MachineModel
+        The machine.
+    axis : int
+        0 for X, 1 for Y.
+
+    Returns
+    -------
+    tuple
+        Servo lag, backlash, spike and vibration sizes of that axis and the
+        shared shapes. [SI]
+    """
+    m = machine
+    own = (
+        (m.tau_x_s, m.backlash_x_m, m.spike_x_m_s2, m.vibration_x_m_s2)
+        if axis == 0
+        else (m.tau_y_s, m.backlash_y_m, m.spike_y_m_s2, m.vibration_y_m_s2)
+    )
+    return (
+        *own,
+        m.backlash_take_up_s,
+        m.spike_tau_s,
+        m.vibration_hz,
+        m.vibration_damping,
+    )
+
+
+def axis_motion(timeline, machine, t_s, axis):
+    """Actual position, velocity and acceleration of one axis, before the geometry.
+
+    Parameters
+    ----------
+    timeline : Timeline
+        The commanded path.
+    machine : MachineModel
+        The machine.
+    t_s : ndarray, shape (n,)
+        True times, increasing. [s]
+    axis : int
+        0 for X, 1 for Y.
+
+    Returns
+    -------
+    list of 3 ndarray
+        [m, m/s, m/s^2]
+    """
+    tau, lost, spike, vibration, take_up, spike_tau, hz, damping = axis_parameters(machine, axis)
+    p = list(timeline.axis_path(t_s - tau, axis))
+    if lost or spike or vibration:
+        times, directions, initial = timeline.reversals(axis)
+        times = times + tau
+        add_backlash(p, t_s, times, directions, initial, lost, take_up)
+        add_spikes(p, t_s, times, directions, spike, spike_tau)
+        add_vibration(p, t_s, times, directions, vibration, hz, damping)
+    return p
+
+
+def sense_motion(machine, sensor, pos, acc, t_s, power_on_s=0.0):
+    """The sensor's reading of a carriage motion.
+
+    Parameters
+    ----------
+    machine : MachineModel
+        The machine (gravity coupling, carriage yaw).
+    sensor : SensorModel
+        The sensor; its noise, ADC steps and clipping are not applied.
+    pos, acc : ndarray, shape (n, 2)
+        Carriage position and acceleration in the machine frame. [m, m/s^2]
+    t_s : ndarray, shape (n,)
+        True times on the timeline. [s]
+    power_on_s : float
+        The sensor's time since power-on at ``t = 0`` (its warm-up). [s]
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Specific force along the sensor's x, y, z after gain and bias. [m/s^2]
+    """
+    tilt = carriage_tilt(pos, machine)
+    g = machine.geometry
+    # without an associated yaw the carriage does not turn: a scalar spares the trigonometry
+    yaw = g.carriage_yaw(pos[:, 0], pos[:, 1]) if g.yaw_x or g.yaw_y else 0.0
+    return sensor.apply_gain(sensor.sense(acc, tilt, yaw, t_s + power_on_s))
+
+
+def sensed_signal(timeline, machine, sensor, t_s, power_on_s=0.0):
+    """Noise-free specific force in the sensor frame at true times ``t_s``.
+
+    Parameters
+    ----------
+    timeline : Timeline
+        The commanded path (:func:`model_timeline`).
+    machine : MachineModel
+        The machine.
+    sensor : SensorModel
+        The sensor; its noise, ADC steps and clipping are not applied.
+    t_s : ndarray, shape (n,)
+        True times on the timeline, increasing. [s]
+    power_on_s : float
+        The sensor's time since power-on at ``t = 0`` (its warm-up). [s]
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Specific force along the sensor's x, y, z after gain and bias. [m/s^2]
+    """
+    t_s = np.asarray(t_s, dtype=np.float64)
+    paths = [axis_motion(timeline, machine, t_s, axis) for axis in (0, 1)]
+    pos, _, acc = machine.geometry.apply(paths[0], paths[1], t_s)
+    return sense_motion(machine, sensor, pos, acc, t_s, power_on_s)

@@ -1,0 +1,298 @@
+"""The model-discrepancy workflow on recordings whose truth is known.
+
+A short circle (50 mm at 3000 mm/min: omega = 1 rad/s, v^2/r = 0.05 m/s^2,
+4 cycles each way) sampled at 200 Hz with the paper's 7 ug/sqrt(Hz) keeps
+each run to a few seconds; ``benchmarks/discrepancy.py`` runs the paper's test
+and the acceptance set.
+"""
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from imu_square.cli import main
+from imu_square.discrepancy import VIEWS, DiscrepancyOptions, find_discrepancy
+from imu_square.discrepancy.workflow import fit_base
+from imu_square.io.mcap import read_mcap, write_mcap
+from imu_square.program import TestProgram
+from imu_square.simulate import (
+    MachineModel,
+    SensorModel,
+    read_machine,
+    simulate_run,
+    with_effects,
+)
+from imu_square.units import UG
+
+PROGRAM = TestProgram(radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=4, dwell_s=1.0)
+SENSOR = SensorModel(
+    model="test", sample_rate_hz=200.0, noise_density_m_s2_rthz=7 * UG, eps_c_rad=math.radians(2.1)
+)
+
+
+def record(tmp_path, machine=None, sensor=SENSOR, seed=1, program=PROGRAM, name="run.mcap"):
+    recording, truth = simulate_run(program, machine or MachineModel(), sensor, seed=seed)
+    path = tmp_path / name
+    write_mcap(recording, path)
+    return path, truth
+
+
+def run_cli(capsys, *argv):
+    code = main(["discrepancy", *map(str, argv)])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.mark.slow
+def test_views_of_clean_recordings_follow_their_null_distribution():
+    """On clean recordings each view's p-value is uniform and its mean S / nu is 1."""
+    n = 30
+    p_values = {v: [] for v in VIEWS}
+    ratios = {v: [] for v in VIEWS}
+    dof = {}
+    fit_p = []
+    for seed in range(n):
+        recording, _ = simulate_run(PROGRAM, MachineModel(), SENSOR, seed=500 + seed)
+        problem, base, params = fit_base(recording, PROGRAM)
+        gaps = problem.gaps(base)
+        for v in VIEWS:
+            p_values[v].append(gaps[v].p_value)
+            ratios[v].append(gaps[v].gap ** 2)
+            dof[v] = gaps[v].dof
+        nu = problem.space.fit_vector(base.residual).size - len(params)
+        fit_p.append(stats.chi2.sf(base.rss, nu))
+    for v in VIEWS:
+        # uniform p-values (Kolmogorov-Smirnov, 8 views at 1e-3 each)
+        assert stats.kstest(p_values[v], "uniform").pvalue > 1e-3, v
+        if v != "band":  # the band view is a maximum over octaves: its mean exceeds 1
+            sd = math.sqrt(2 / dof[v] / n)  # of the mean of chi2(nu)/nu over n runs
+            assert abs(np.mean(ratios[v]) - 1) < 4 * sd, (v, np.mean(ratios[v]))
+    assert stats.kstest(fit_p, "uniform").pvalue > 1e-3
+
+
+def test_noise_floor_is_the_sensor_density_and_finds_a_1f_corner():
+    recording, _ = simulate_run(PROGRAM, MachineModel(), SENSOR, seed=3)
+    noise = fit_base(recording, PROGRAM)[0].space.noise
+    # relative sd of the density from the scatter: sqrt(1 / (2 dof))
+    tol = 5 / math.sqrt(2 * noise.dof)
+    np.testing.assert_allclose(noise.density_m_s2_rthz, 7 * UG, rtol=tol)
+    assert np.all(noise.flicker_corner_hz < 0.05)
+    flicker = replace(SENSOR, flicker_corner_hz=0.3)
+    corners = []
+    for seed in range(6):
+        recording, _ = simulate_run(PROGRAM, MachineModel(), flicker, seed=seed)
+        corners.append(fit_base(recording, PROGRAM)[0].space.noise.flicker_corner_hz)
+    # a 0.3 Hz corner, from 8 cycles: about +-0.15 Hz per run and axis
+    assert 0.2 < np.mean(corners) < 0.4
+
+
+def test_clean_recording_names_nothing_and_exits_0(tmp_path, capsys):
+    path, _ = record(tmp_path, seed=11)
+    code, out, err = run_cli(capsys, path, "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["named_effects"] == [] and doc["ambiguous"] == [] and doc["steps"] == []
+    assert set(doc["base_gap"]) == set(VIEWS) == set(doc["final_gap"])
+    assert all(g < 1.3 for g in doc["final_gap"].values())
+    assert "explains the recording down to the noise" in err
+
+
+# 5 ms at 1 rad/s is 5 mrad of phase against this test's noise floor of about 0.3 mrad
+LAG = MachineModel(tau_x_s=2e-3, tau_y_s=7e-3)
+
+
+def test_servo_mismatch_is_named_measured_and_the_gap_closes(tmp_path, capsys):
+    path, _ = record(tmp_path, machine=LAG, seed=2)
+    plot = tmp_path / "gaps.png"
+    code, out, err = run_cli(capsys, path, "--json", "--plot", plot)
+    assert code == 1
+    doc = json.loads(out)
+    assert doc["named_effects"] == ["servo_mismatch"] and doc["ambiguous"] == []
+    (step,) = doc["steps"]
+    assert step["effect"] == "servo_mismatch" and step["p_value"] < 1e-6
+    assert set(step) >= {"effect", "parameters", "gap_before", "gap_after", "statistic", "p_value"}
+    params = step["parameters"]
+    mismatch = params["tau_y_ms"]["value"] - params["tau_x_ms"]["value"]
+    u = params["tau_y_ms"]["u_value"] or params["tau_x_ms"]["u_value"]
+    assert abs(mismatch - 5.0) < 3 * u and params["tau_y_ms"]["unit"] == "ms"
+    assert step["gap_before"]["cw_vs_ccw"] > 1.5 > 1.2 > step["gap_after"]["cw_vs_ccw"]
+    assert all(g < 1.3 for g in doc["final_gap"].values())
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "step 1: servo_mismatch" in err and "tau_y_ms" in err
+
+
+def test_two_effects_are_named_in_turn(tmp_path):
+    machine = replace(LAG, backlash_x_m=5e-6, backlash_y_m=3e-6, backlash_take_up_s=0.02)
+    path, _ = record(tmp_path, machine=machine, seed=4)
+    result = find_discrepancy(read_mcap(path), DiscrepancyOptions(suggest=False))
+    assert set(result.named_effects) == {"servo_mismatch", "backlash"}
+    values = {v.name: v for v in result.model}
+    for name, truth in (("backlash.x_um", 5.0), ("backlash.y_um", 3.0)):
+        assert abs(values[name].value - truth) < 4 * values[name].u_value, name
+    assert max(g.gap for g in result.final_gap.values()) < 1.3
+
+
+def test_look_alike_effects_are_named_together_with_the_tests_that_separate_them(tmp_path):
+    """A sensor gain, a machine scale and a gravity coupling all change the amplitudes."""
+    _, sensor = with_effects(["sensor_gain_mismatch"], sensor=SENSOR)
+    path, _ = record(tmp_path, sensor=sensor, seed=5)
+    result = find_discrepancy(read_mcap(path))
+    (group,) = result.ambiguous
+    assert set(group) == {"sensor_gain_mismatch", "scale_mismatch", "gravity_coupling"}
+    assert result.named_effects == ()
+    (suggestion,) = result.suggested_tests
+    pairs = {frozenset(p["effects"]): p["separated_by"] for p in suggestion["pairs"]}
+    turned = "the same test with the sensor turned 90°"
+    # a gain lives in the sensor frame, a scale in the machine's: only turning tells them apart
+    assert pairs[frozenset({"sensor_gain_mismatch", "scale_mismatch"})] == [turned]
+    # gravity's share does not grow with the feed, inertia's does
+    gravity_scale = pairs[frozenset({"gravity_coupling", "scale_mismatch"})]
+    assert "the same circle at twice the feed" in gravity_scale and turned not in gravity_scale
+    # every member's own fit of the gap is reported
+    (step,) = result.steps
+    assert set(step.alternatives) == set(group) - {step.effect}
+    members = {step.effect: step.parameters, **step.alternatives}
+    gains = {p.name: p.value for p in members["sensor_gain_mismatch"]}
+    assert gains["gain_y_percent"] == pytest.approx(0.5, abs=0.08)
+
+
+def test_effects_outside_the_allowed_ones_leave_a_gap(tmp_path, capsys):
+    path, _ = record(tmp_path, machine=LAG, seed=6)
+    _, out, err = run_cli(capsys, path, "--json", "--effects-allowed", "backlash,reversal_spikes")
+    doc = json.loads(out)
+    assert doc["candidates"] == ["backlash", "reversal_spikes"]
+    assert "servo_mismatch" not in doc["named_effects"]
+    assert doc["final_gap"]["cw_vs_ccw"] > 1.5
+    assert any("gap above the noise floor is left in" in n for n in doc["notes"])
+    assert "note: a gap above the noise floor is left in" in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--effects-allowed", "servo_mismatch,wobble"], "unknown effect 'wobble'"),
+        (["--significance", "1.5"], "significance must be a probability in (0, 1), got 1.5"),
+    ],
+)
+def test_user_errors_are_one_line_and_exit_2(tmp_path, capsys, argv, message):
+    path, _ = record(tmp_path, seed=7)
+    code, out, err = run_cli(capsys, path, *argv)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+
+
+def test_a_missing_recording_is_a_user_error(tmp_path, capsys):
+    code, _, err = run_cli(capsys, tmp_path / "nope.mcap")
+    assert code == 2 and "nope.mcap" in err and err.count("\n") == 1
+
+
+def test_a_recording_without_circles_is_refused_naming_the_file(tmp_path, capsys):
+    recording, _ = simulate_run(PROGRAM, MachineModel(), SENSOR, seed=8)
+    still = replace(recording, accel=np.tile(recording.accel[:1], (recording.n_samples, 1)))
+    path = tmp_path / "still.mcap"
+    write_mcap(still, path)
+    code, _, err = run_cli(capsys, path)
+    assert code == 2 and f"{path}: " in err and "no circular motion" in err
+
+
+@pytest.mark.slow
+def test_the_written_model_reproduces_the_recording_in_imu_square_simulate(tmp_path, capsys):
+    machine = replace(LAG, backlash_x_m=5e-6, backlash_y_m=3e-6, backlash_take_up_s=0.02)
+    path, _ = record(tmp_path, machine=machine, seed=9)
+    model = tmp_path / "model"
+    code, out, _ = run_cli(capsys, path, "--json", "--model-out", model)
+    assert code == 1
+    first = json.loads(out)
+    sim = tmp_path / "sim.mcap"
+    argv = ["simulate", "--seed", "31", "-o", str(sim)]
+    for name in ("program", "machine", "sensor"):
+        argv += [f"--{name}", str(model / f"{name}.toml")]
+    assert main(argv) == 0
+    capsys.readouterr()
+    code, out, _ = run_cli(capsys, sim, "--json")
+    second = json.loads(out)
+    assert code == 1 and set(second["named_effects"]) == set(first["named_effects"])
+    # the same gap views within the noise: S / nu of two independent recordings of the
+    # same model differ by about sqrt(2 (nu + 2 lambda)) / nu
+    for view in VIEWS:
+        a, b = first["views"]["base"][view], second["views"]["base"][view]
+        nu = a["dof"]
+        excess = max(a["statistic"] - nu, 0.0)
+        sd = math.sqrt(2 * (nu + 2 * excess)) / nu
+        if view != "band":
+            assert abs(a["gap"] ** 2 - b["gap"] ** 2) < 5 * sd, view
+        for doc in (first, second):  # the final model explains each down to the noise
+            assert doc["views"]["final"][view]["p_value"] > 1e-3, view
+
+
+def test_a_lag_of_x_is_written_as_a_lag_of_x(tmp_path, capsys):
+    """Only the mismatch is identifiable; the written lags are both within their range."""
+    path, _ = record(tmp_path, machine=MachineModel(tau_x_s=6e-3, tau_y_s=1e-3), seed=12)
+    model = tmp_path / "model"
+    code, out, _ = run_cli(capsys, path, "--json", "--model-out", model, "--no-suggest")
+    assert code == 1 and json.loads(out)["named_effects"] == ["servo_mismatch"]
+    machine = read_machine(model / "machine.toml")
+    assert machine.tau_y_s == 0.0
+    assert machine.tau_x_s == pytest.approx(5e-3, abs=0.6e-3)  # about 3 sd
+
+
+def _independent_circle_csv(path, tau_x_s, tau_y_s, fs=200.0, seed=5):
+    """A circle test with servo lags, in a few lines of numpy (not the project's simulator).
+
+    CCW then CW, 4 cycles each plus 180 deg at both ends, linear feed ramps of
+    0.2 s, 1 s dwell, white noise of 7 ug/sqrt(Hz), gravity on z.
+    """
+    r, v, cycles, over, dwell, ramp, lead = 0.05, 0.05, 4, np.pi, 1.0, 0.2, 2.0
+    w = v / r
+    total = 2 * np.pi * cycles + 2 * over
+    dur = total / w + ramp
+
+    def progress(t):  # angle, speed, acceleration since the block start
+        tc = np.clip(t, 0, dur)
+        up, down = tc < ramp, tc > dur - ramp
+        s = np.where(up, w * tc**2 / (2 * ramp), w * (tc - ramp / 2))
+        s = np.where(down, total - w * (dur - tc) ** 2 / (2 * ramp), s)
+        ds = np.where(up, w * tc / ramp, np.where(down, w * (dur - tc) / ramp, w))
+        dds = np.where(up, w / ramp, np.where(down, -w / ramp, 0.0))
+        moving = (t >= 0) & (t <= dur)
+        return s, np.where(moving, ds, 0.0), np.where(moving, dds, 0.0)
+
+    t = np.arange(0, 2 * lead + 2 * dur + dwell, 1 / fs)
+    acc = np.zeros((t.size, 3))
+    acc[:, 2] = 9.80665
+    for t0, sign, phi0 in ((lead, 1, 0.0), (lead + dur + dwell, -1, total)):
+        for axis, tau in ((0, tau_x_s), (1, tau_y_s)):
+            s, ds, dds = progress(t - tau - t0)
+            phi, dphi, ddphi = phi0 + sign * s, sign * ds, sign * dds
+            if axis == 0:
+                a = -r * (np.cos(phi) * dphi**2 + np.sin(phi) * ddphi)
+            else:
+                a = r * (np.cos(phi) * ddphi - np.sin(phi) * dphi**2)
+            acc[:, axis] += np.where(ds > 0, a, 0.0)
+    acc += np.random.default_rng(seed).normal(0, 7e-6 * 9.80665 * np.sqrt(fs / 2), acc.shape)
+    header = "time_s,accel_x,accel_y,accel_z"
+    np.savetxt(
+        path, np.column_stack([t, acc]), delimiter=",", header=header, comments="", fmt="%.7f"
+    )
+
+
+def test_a_csv_from_an_independent_generator_runs_through_import(tmp_path, capsys):
+    csv = tmp_path / "lag.csv"
+    _independent_circle_csv(csv, tau_x_s=0.0, tau_y_s=0.004)
+    program = tmp_path / "program.toml"
+    program.write_text(PROGRAM.to_toml())
+    mcap = tmp_path / "lag.mcap"
+    assert main(["import", str(csv), "--program", str(program), "-o", str(mcap)]) == 0
+    code, out, _ = run_cli(capsys, mcap, "--json")
+    assert code == 1
+    doc = json.loads(out)
+    assert doc["named_effects"] == ["servo_mismatch"]
+    p = doc["steps"][0]["parameters"]
+    mismatch = p["tau_y_ms"]["value"] - p["tau_x_ms"]["value"]
+    u = p["tau_y_ms"]["u_value"] or p["tau_x_ms"]["u_value"]
+    assert abs(mismatch - 4.0) < 3 * u
+    assert max(doc["final_gap"].values()) < 1.3
