@@ -438,9 +438,15 @@ def main():
                 rows.append(row)
                 if i % 25 == 0:
                     print(f"  {i}/{len(cases)} cases, {time.perf_counter() - t0:.0f} s", flush=True)
+                    _write(speed_rows, {"partial": True}, rows)  # a long run keeps its cases
         summary = tables(rows)
         summary["wall_s"] = time.perf_counter() - t0
     _print(summary, speed_rows)
+    _write(speed_rows, summary, rows)
+    print(f"\nwrote {RESULTS}")
+
+
+def _write(speed_rows, summary, rows):
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     doc = {
         "program": PROGRAM.to_mapping(),
@@ -450,7 +456,6 @@ def main():
         "cases": rows,
     }
     RESULTS.write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
-    print(f"\nwrote {RESULTS}")
 
 
 if __name__ == "__main__":

@@ -227,13 +227,32 @@ def layout_from_recording(recording, program, options):
     AnalysisError
         Where the pipeline refuses the recording (no circle, wrong direction, ...).
     """
-    data = filter_recording(recording, options.cutoff_hz, options.order)
-    seg = segment(data.t_s, data.xy, program, block_events(recording), guard_s=data.margin_s)
-    clipped = clipped_times(data.t_s, data.raw, recording.sensor.range_m_s2)
+    data = filter_recording(recording, options.cutoff_hz, options.order, program.frequency_hz)
+    seg = segment(
+        data.t_s,
+        data.xy,
+        program,
+        block_events(recording),
+        data.margin_s,
+        gaps_s=data.long_gap_spans_s,
+        short_gaps_s=data.short_gap_spans_s,
+        reach_s=data.reach_s,
+    )
+    clipped = clipped_times(data.t_s[data.valid], data.raw[data.valid], recording.sensor.range_m_s2)
     bad = bad_intervals(data.gap_spans_s, clipped)
-    cyc = cycle_traces(data.t_s, data.xy, seg, bad, data.margin_s, grid_points=8)
+    cyc = cycle_traces(
+        data.t_s,
+        data.xy,
+        seg,
+        bad,
+        data.margin_s,
+        grid_points=8,
+        missing_s=data.bridged_spans_s,
+        onset_margin_s=data.onset_margin_s,
+    )
     prog = seg.program
-    t_all = data.t_s
+    # the recorded samples only: the filter's bridged ones are not data
+    t_all = recording.time_s
     period = seg.period_s
     positions = {}
     blocks = []
