@@ -93,6 +93,7 @@ def test_separate_gravity_json_keys_match_the_table(tmp_path, capsys):
         "omega_rad_s",
         "amplitude_m_s2",
         "servo_mismatch_rad",
+        "servo_amplitude_phase_rad",
         "gravity_phase_rad",
         "expected_squareness_rad",
     }

@@ -131,8 +131,9 @@ def test_the_same_history_whatever_the_engine_and_the_alarm_night(archive, capsy
 @pytest.mark.slow
 def test_other_settings_into_another_history_and_compare(archive, capsys):
     other = archive / "other.toml"
-    other.write_text("[analysis]\ncutoff_hz = 2.0\norder = 2\nbootstrap = 0\n")
-    plain, into = archive / "plain.db", archive / "cutoff2.db"
+    # half the default cutoff (24 Hz at this 0.95 Hz circle), a second order
+    other.write_text("[analysis]\ncutoff_hz = 12.0\norder = 2\nbootstrap = 0\n")
+    plain, into = archive / "plain.db", archive / "cutoff12.db"
     _replay(archive, str(archive / "archive"), "--into", str(plain))
     _replay(archive, str(archive / "archive"), "--settings", str(other), "--into", str(into))
     capsys.readouterr()
