@@ -296,3 +296,32 @@ def test_a_csv_from_an_independent_generator_runs_through_import(tmp_path, capsy
     u = p["tau_y_ms"]["u_value"] or p["tau_x_ms"]["u_value"]
     assert abs(mismatch - 4.0) < 3 * u
     assert max(doc["final_gap"].values()) < 1.3
+
+
+@pytest.mark.parametrize(
+    ("option", "target", "message"),
+    [
+        ("--plot", "nodir/gaps.png", "the folder"),
+        ("--plot", "gaps.txt", "plot format (suffix) must be one of"),
+        ("--plot", "afile", "got ''"),
+        ("--model-out", "afile", "cannot create the model folder"),
+        ("--model-out", "afile/model", "cannot create the model folder"),
+    ],
+)
+def test_a_bad_output_is_one_line_before_the_work_and_damages_nothing(
+    tmp_path, capsys, option, target, message
+):
+    path, _ = record(tmp_path, seed=7)
+    (tmp_path / "afile").write_text("precious")
+    code, out, err = run_cli(capsys, path, option, tmp_path / target)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+    assert (tmp_path / "afile").read_text() == "precious"
+    assert "noise floor" not in err  # refused before the fit, not after it
+
+
+def test_analyze_refuses_a_plot_in_a_missing_folder_before_the_work(tmp_path, capsys):
+    path, _ = record(tmp_path, seed=7)
+    code = main(["analyze", str(path), "--plot", str(tmp_path / "nodir" / "a.png")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "does not exist" in err

@@ -68,6 +68,10 @@ def run(args):
         gain_tolerance=args.gain_tolerance,
     )
     program = read_program(args.program) if args.program else None
+    if args.plot:  # refuse a bad output before the work, not after it
+        from imu_square.io.output import check_plot_path
+
+        check_plot_path(args.plot)
     if args.separate_gravity:
         return _run_separated(args, options, program)
     results = []

@@ -59,6 +59,14 @@ def run(args):
         suggest=not args.no_suggest,
     )
     options.candidates()  # refuse an unknown effect before reading the file
+    if args.plot:  # refuse a bad output before the work, not after it
+        from imu_square.io.output import check_plot_path
+
+        check_plot_path(args.plot)
+    if args.model_out:
+        from imu_square.monitor.outputs import ensure_folder
+
+        ensure_folder(args.model_out, "model")
     recording = read_mcap(args.recording)
     try:
         result = find_discrepancy(recording, options, program=program)
