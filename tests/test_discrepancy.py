@@ -325,3 +325,14 @@ def test_analyze_refuses_a_plot_in_a_missing_folder_before_the_work(tmp_path, ca
     code = main(["analyze", str(path), "--plot", str(tmp_path / "nodir" / "a.png")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "does not exist" in err
+
+
+def test_a_two_feed_recording_is_refused_in_the_user_s_terms(tmp_path, capsys):
+    program = TestProgram(
+        radius_m=0.05, feeds_m_per_s=(0.05, 0.03), cycles_per_feed=(3, 2), dwell_s=1.0
+    )
+    path, _ = record(tmp_path, program=program, name="two.mcap")
+    code, out, err = run_cli(capsys, path)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"{path}: the program runs 2 feeds (3000, 1800 mm/min)" in err
+    assert "period_s" not in err and "at_feed" not in err
