@@ -615,11 +615,15 @@ def _fastest(program, name="centripetal_m_s2"):
     return max(getattr(program.at_feed(f), name) for f in range(program.n_feeds))
 
 
-def _check(name, value, lo, hi, lo_open=True):
-    ok = (lo < value if lo_open else lo <= value) and value <= hi and math.isfinite(value)
+def _check(name, value, lo, hi, lo_open=True, hi_open=False):
+    ok = (
+        (lo < value if lo_open else lo <= value)
+        and (value < hi if hi_open else value <= hi)
+        and math.isfinite(value)
+    )
     if not ok:
-        left = "(" if lo_open else "["
-        raise PlanError(f"{name} must be in {left}{lo:g}, {hi:g}], got {value!r}")
+        left, right = "(" if lo_open else "[", ")" if hi_open else "]"
+        raise PlanError(f"{name} must be in {left}{lo:g}, {hi:g}{right}, got {value!r}")
 
 
 def check_inputs(sensor, limits, goal):
@@ -636,13 +640,13 @@ def check_inputs(sensor, limits, goal):
     _check("resolution [m/s^2]", sensor.resolution_m_s2, 0.0, 1.0, lo_open=False)
     _check("max feed [m/s]", limits.max_feed_m_s, 0.0, 10.0)
     _check("max centripetal acceleration [m/s^2]", limits.max_accel_m_s2, 0.0, 1e3)
-    _check("travel [m]", limits.travel_m, 0.0, 10.0)
+    _check("travel [m]", limits.travel_m, 2 * MIN_RADIUS_M, 10.0, lo_open=False)
     _check("time [s]", limits.time_s, 0.0, 1e6)
     for lag in limits.servo_lags_s:
         _check("servo lag [s]", lag, 0.0, 1.0, lo_open=False)
     _check("sensor rotation eps_c [rad]", limits.eps_c_rad, 0.0, math.pi / 4, lo_open=False)
     _check("ramp [s]", limits.ramp_s, 0.0, 5.0, lo_open=False)
-    _check("confidence", goal.confidence, 0.0, 1.0 - 1e-9)
+    _check("confidence", goal.confidence, 0.0, 1.0, hi_open=True)
     if goal.change_rad is not None:
         _check("change to detect [rad]", goal.change_rad, 0.0, 1.0)
     if isinstance(goal.baseline_runs, bool) or not isinstance(goal.baseline_runs, int):

@@ -296,3 +296,43 @@ def test_a_csv_from_an_independent_generator_runs_through_import(tmp_path, capsy
     u = p["tau_y_ms"]["u_value"] or p["tau_x_ms"]["u_value"]
     assert abs(mismatch - 4.0) < 3 * u
     assert max(doc["final_gap"].values()) < 1.3
+
+
+@pytest.mark.parametrize(
+    ("option", "target", "message"),
+    [
+        ("--plot", "nodir/gaps.png", "the folder"),
+        ("--plot", "gaps.txt", "plot format (suffix) must be one of"),
+        ("--plot", "afile", "got ''"),
+        ("--model-out", "afile", "cannot create the model folder"),
+        ("--model-out", "afile/model", "cannot create the model folder"),
+    ],
+)
+def test_a_bad_output_is_one_line_before_the_work_and_damages_nothing(
+    tmp_path, capsys, option, target, message
+):
+    path, _ = record(tmp_path, seed=7)
+    (tmp_path / "afile").write_text("precious")
+    code, out, err = run_cli(capsys, path, option, tmp_path / target)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and message in err and "Traceback" not in err
+    assert (tmp_path / "afile").read_text() == "precious"
+    assert "noise floor" not in err  # refused before the fit, not after it
+
+
+def test_analyze_refuses_a_plot_in_a_missing_folder_before_the_work(tmp_path, capsys):
+    path, _ = record(tmp_path, seed=7)
+    code = main(["analyze", str(path), "--plot", str(tmp_path / "nodir" / "a.png")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "does not exist" in err
+
+
+def test_a_two_feed_recording_is_refused_in_the_user_s_terms(tmp_path, capsys):
+    program = TestProgram(
+        radius_m=0.05, feeds_m_per_s=(0.05, 0.03), cycles_per_feed=(3, 2), dwell_s=1.0
+    )
+    path, _ = record(tmp_path, program=program, name="two.mcap")
+    code, out, err = run_cli(capsys, path)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert f"{path}: the program runs 2 feeds (3000, 1800 mm/min)" in err
+    assert "period_s" not in err and "at_feed" not in err

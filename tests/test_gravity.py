@@ -239,3 +239,18 @@ def test_uncertainty_matches_the_closed_form_over_seeds():
     assert abs(np.mean(errors)) < 3.5 * np.std(errors, ddof=1) / math.sqrt(n) + 1 * URAD
     # the reported type A uncertainty agrees with the spread on average
     assert float(np.sqrt(np.mean(np.square(us)))) == pytest.approx(np.std(errors, ddof=1), rel=0.5)
+
+
+def test_cli_refuses_one_run_given_twice(tmp_path, capsys):
+    # the same two-feed run twice (or a copy of it) would count each feed twice and
+    # report an uncertainty sqrt(2) too small
+    rec, truth = two_feed_run()
+    both = tmp_path / "both.mcap"
+    write_run(both, rec, truth)
+    copy = tmp_path / "copy.mcap"
+    copy.write_bytes(both.read_bytes())
+    for second in (both, copy):
+        assert main(["analyze", str(both), str(second), "--separate-gravity"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "hold the same samples" in err, err
+        assert f"{both} and {second}" in err

@@ -136,9 +136,15 @@ def test_time_to_detect_scales_the_cycles():
     ("sensor", "limits", "goal", "match"),
     [
         (SENSOR25, replace(LIMITS, time_s=2.0), Goal(), r"no circle test fits: at least 5 cycles"),
-        (SENSOR25, replace(LIMITS, travel_m=0.005), Goal(), r"no circle test fits"),
+        (
+            SENSOR25,
+            replace(LIMITS, travel_m=0.005),
+            Goal(),
+            r"travel \[m\] must be in \[0\.01, 10\], got 0\.005",
+        ),
         (replace(SENSOR25, noise_density_m_s2_rthz=-1.0), LIMITS, Goal(), r"noise density .*-1\.0"),
-        (SENSOR25, LIMITS, Goal(confidence=1.5), r"confidence must be in \(0, 1\], got 1\.5"),
+        (SENSOR25, LIMITS, Goal(confidence=1.5), r"confidence must be in \(0, 1\), got 1\.5"),
+        (SENSOR25, LIMITS, Goal(confidence=1.0), r"confidence must be in \(0, 1\), got 1\.0"),
         (SENSOR25, LIMITS, Goal(baseline_runs=0), r"baseline runs must be in \(0, 1e\+06\]"),
         (SENSOR25, replace(LIMITS, max_accel_m_s2=0.0), Goal(), r"max centripetal .*got 0\.0"),
     ],
@@ -250,3 +256,22 @@ def test_evaluate_says_what_a_given_program_resolves():
     assert plan.detects is False
     assert plan.analysed_s == pytest.approx(30 * 2 * math.pi, rel=1e-12)
     assert plan.cutoff_hz == 4.0
+
+
+PLAN_ARGS = ["plan", "--max-feed-mm-min", "30000", "--max-accel-m-s2", "5", "--travel-mm", "500"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--noise-ug", "-3"], "noise_density_ug_rthz > 0, got -3 ug/sqrt(Hz)"),
+        (["--noise-ug", "25", "-o", "{tmp}/nodir/plan.toml"], "nodir' does not exist"),
+        (["--noise-ug", "25", "-o", "{tmp}"], "is a directory"),
+        (["--noise-ug", "25", "--confidence", "1"], "confidence must be in (0, 1), got 1.0"),
+    ],
+)
+def test_cli_refusals_are_one_line_before_any_plan(tmp_path, capsys, extra, message):
+    argv = [*PLAN_ARGS, "--time-s", "300", *(a.format(tmp=tmp_path) for a in extra)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err  # no plan printed before the error

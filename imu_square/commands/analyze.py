@@ -68,6 +68,10 @@ def run(args):
         gain_tolerance=args.gain_tolerance,
     )
     program = read_program(args.program) if args.program else None
+    if args.plot:  # refuse a bad output before the work, not after it
+        from imu_square.io.output import check_plot_path
+
+        check_plot_path(args.plot)
     if args.separate_gravity:
         return _run_separated(args, options, program)
     results = []
@@ -128,6 +132,7 @@ def _run_separated(args, options, program):
 
     # the messages of reading and of the pipeline name the file (and the feed)
     sources = [(path, read_mcap(path)) for path in args.recordings]
+    _check_distinct(sources)
     feeds = analyze_feeds(sources, options, program)
     for f in feeds:
         label = f"{f.source} at {f.feed_mm_per_min:g} mm/min"
@@ -145,3 +150,18 @@ def _run_separated(args, options, program):
         plot_results([f.result for f in feeds], args.plot, title=title)
         print(f"wrote {args.plot}", file=sys.stderr)
     return 0
+
+
+def _check_distinct(sources):
+    """Refuse one run given twice: its feeds would count twice and shrink the uncertainty."""
+    import hashlib
+
+    seen = {}
+    for path, recording in sources:
+        digest = hashlib.sha256(recording.accel.tobytes()).hexdigest()
+        if digest in seen:
+            raise ImuSquareError(
+                f"recordings: {seen[digest]} and {path} hold the same samples: give each run "
+                "once (a run counted twice would halve its variance)"
+            )
+        seen[digest] = path

@@ -51,6 +51,7 @@ def run(args):
     from imu_square.io.mcap import read_mcap
     from imu_square.program import read_program
     from imu_square.simulate.writer import write_model_files
+    from imu_square.units import MM_PER_MIN
 
     program = read_program(args.program) if args.program else None
     options = DiscrepancyOptions(
@@ -59,7 +60,23 @@ def run(args):
         suggest=not args.no_suggest,
     )
     options.candidates()  # refuse an unknown effect before reading the file
+    if args.plot:  # refuse a bad output before the work, not after it
+        from imu_square.io.output import check_plot_path
+
+        check_plot_path(args.plot)
+    if args.model_out:
+        from imu_square.monitor.outputs import ensure_folder
+
+        ensure_folder(args.model_out, "model")
     recording = read_mcap(args.recording)
+    prog = program or recording.program
+    if prog is not None and prog.n_feeds > 1:  # else a message about a Python property
+        feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in prog.feeds)
+        raise ImuSquareError(
+            f"{args.recording}: the program runs {prog.n_feeds} feeds ({feeds} mm/min); "
+            "discrepancy fits a one-feed test: record each feed on its own, or use "
+            "analyze --separate-gravity for the squareness"
+        )
     try:
         result = find_discrepancy(recording, options, program=program)
     except AnalysisError as exc:  # the pipeline names no file: say which

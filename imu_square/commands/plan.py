@@ -112,7 +112,8 @@ def _sensor(args):
     if noise is None or noise <= 0:
         raise ConfigError(
             "plan: the sensor's noise is needed: give --noise-density-ug (ug/sqrt(Hz)) or a "
-            f"--sensor file with noise_density_ug_rthz > 0, got {noise!r}"
+            f"--sensor file with noise_density_ug_rthz > 0, got "
+            f"{'none' if noise is None else f'{noise / UG:g} ug/sqrt(Hz)'}"
         )
     if args.flicker_corner_hz is not None:
         corner = args.flicker_corner_hz
@@ -131,6 +132,10 @@ def run(args):
     from imu_square.planner import Goal, Limits, plan_test
     from imu_square.units import MM, MM_PER_MIN, MS, URAD
 
+    if args.output:  # refuse a bad path before planning, not after printing the plan
+        from imu_square.io.output import check_output_path
+
+        check_output_path(args.output, overwrite=True)
     sensor, sensor_eps = _sensor(args)
     eps_deg = args.eps_c_deg
     eps = math.radians(eps_deg) if eps_deg is not None else sensor_eps

@@ -85,3 +85,36 @@ def check_free_space(path, needed_bytes, what):
             f"{path}: the disk has {free / MB:.1f} MB free, and the recording ({what}) needs "
             f"up to {needed_bytes / MB:.1f} MB: free some space or write elsewhere"
         )
+
+
+def check_plot_path(path):
+    """Refuse a plot path that cannot be written or whose suffix names no image format.
+
+    Checked before any work, so that a long analysis is not lost to a typo in
+    the plot's name; an existing file is replaced.
+
+    Parameters
+    ----------
+    path : str or Path
+        The image to be written, e.g. ``gaps.png``.
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputError
+        Naming the path and what is wrong with it.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    from imu_square.errors import check_option
+
+    path = check_output_path(path, overwrite=True)
+    formats = sorted(FigureCanvasBase.get_supported_filetypes())
+    check_option(
+        "plot format (suffix)", path.suffix.lstrip(".").lower(), formats, str(path), OutputError
+    )
+    return path
