@@ -125,3 +125,11 @@ def test_the_installed_script_prints_no_traceback(tmp_path):
     assert proc.returncode == 2
     assert proc.stderr.count(str(files["badprog.mcap"])) == 1
     assert "Traceback" not in proc.stderr
+
+
+def test_history_refuses_a_plot_it_cannot_write_before_opening_the_history(tmp_path, capsys):
+    config = tmp_path / "monitor.toml"  # never read: the plot is checked first
+    assert main(["history", "--config", str(config), "--plot", str(tmp_path / "trend.txt")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "plot format (suffix)" in err[0] and "'txt'" in err[0]
+    assert not (tmp_path / "trend.txt").exists() and not config.exists()

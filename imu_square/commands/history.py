@@ -57,9 +57,9 @@ def run(args):
 
     since = _since(args.since)
     if args.plot:
-        from imu_square.io.output import check_output_path
+        from imu_square.io.output import check_plot_path
 
-        check_output_path(args.plot, overwrite=True)
+        check_plot_path(args.plot)
     with monitor_session(args.config) as (config, history):
         if args.backup:
             path = history.backup(args.backup)
