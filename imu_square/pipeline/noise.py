@@ -36,6 +36,7 @@ import numpy as np
 from scipy import signal
 
 from imu_square.pipeline.filter import design_lowpass
+from imu_square.pipeline.order_stats import column_medians
 from imu_square.pipeline.uncertainty import cramer_rao
 
 _MAD_TO_SD = 1.4826
@@ -174,7 +175,7 @@ def white_density(residuals, sample_rate_hz):
         data hold vibration the model does not. [m/s^2/sqrt(Hz)]
     """
     r = np.concatenate(residuals)
-    sd = _MAD_TO_SD * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+    sd = _MAD_TO_SD * column_medians(np.abs(r - column_medians(r)))
     return float(np.sqrt(np.mean(sd**2) / (sample_rate_hz / 2)))
 
 
