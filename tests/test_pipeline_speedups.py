@@ -8,6 +8,7 @@ block markers, a fast circle. The two must agree to round-off: 1e-3 of the
 Cramér-Rao bound for the squareness, far below anything the data can tell.
 """
 
+import itertools
 import math
 from dataclasses import replace
 
@@ -16,7 +17,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from scipy import signal
 
+from imu_square.pipeline import filter as filter_module
 from imu_square.pipeline import noise, order_stats, segment
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import TestProgram
@@ -107,19 +110,79 @@ def test_phase_fit_matches_lstsq(omega, periods, ellipse, noise, gap, seed):
     assert fast == pytest.approx(ref, rel=1e-9, abs=1e-12)
 
 
-def _welch_reference(residuals, fs, nperseg):
-    """What flicker_corner averaged before, from scipy.signal.welch."""
-    from scipy import signal
+def _periodogram_sum_reference(r, window):
+    """noise._periodogram_sum from scipy.signal.welch, its scaling undone."""
+    n = window.size
+    _, p = signal.welch(r, fs=1.0, window=window, nperseg=n, axis=0)
+    p = p * (1 + (r.shape[0] - n) // (n // 2)) * np.sum(window**2)
+    p[1 : (n + 1) // 2] /= 2
+    return p.sum(axis=1)
 
-    total, n_avg = 0.0, 0
-    for r in residuals:
-        if r.shape[0] < nperseg:
-            continue
-        f, p = signal.welch(r, fs=fs, nperseg=nperseg, axis=0)
-        k = 1 + (r.shape[0] - nperseg) // (nperseg // 2)
-        total = total + k * p.sum(axis=1)
-        n_avg += k * r.shape[1]
-    return f, total / n_avg
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n=st.integers(64, 3000),
+    log_seg=st.integers(3, 6),
+    axes=st.integers(1, 3),
+    seed=st.integers(0, 99),
+)
+def test_periodogram_sum_is_scipys_welch(n, log_seg, axes, seed):
+    r = np.random.default_rng(seed).standard_normal((n, axes)).cumsum(axis=0)
+    window = signal.get_window("hann", 1 << log_seg)
+    np.testing.assert_allclose(
+        noise._periodogram_sum(r, window), _periodogram_sum_reference(r, window), rtol=1e-10
+    )
+
+
+def _lowpass_reference(data, cutoff_hz, order, sample_rate_hz, breaks=()):
+    """filter.lowpass before (commit 28f8832): sosfiltfilt along axis 0."""
+    sos = filter_module.design_lowpass(cutoff_hz, order, sample_rate_hz)
+    data = np.asarray(data, dtype=np.float64)
+    out = data.copy()
+    edges = [0, *sorted(int(b) for b in breaks), data.shape[0]]
+    for a, b in itertools.pairwise(edges):
+        if b - a > 3 * (2 * sos.shape[0] + 1):
+            out[a:b] = signal.sosfiltfilt(sos, data[a:b], axis=0)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(5000,), (5000, 2), (5000, 3)])
+@pytest.mark.parametrize("order", [1, 4])
+def test_lowpass_channel_by_channel_is_bit_for_bit(shape, order):
+    data = np.random.default_rng(order).standard_normal(shape)[:, ...]
+    breaks = [7, 1200, 3000]  # a stretch too short to filter, and three filtered
+    fast = filter_module.lowpass(data, 20.0, order, 1000.0, breaks)
+    assert fast.flags.c_contiguous
+    np.testing.assert_array_equal(fast, _lowpass_reference(data, 20.0, order, 1000.0, breaks))
+
+
+def _model_residual_reference(filtered, segmentation, cycles, mean_fit):
+    """noise.model_residual before (commit 28f8832): np.interp with period=, axis by axis."""
+    grid = cycles.phi_grid
+    blocks = {b.plan.index: b for b in segmentation.blocks}
+    t_s, raw, valid = filtered.t_s, filtered.raw, filtered.valid
+    out = []
+    for i, cyc in enumerate((cycles.ccw, cycles.cw)):
+        params = [mean_fit.fit.x.params[i], mean_fit.fit.y.params[i]]
+        means = [mean_fit.mean_x[i], mean_fit.mean_y[i]]
+        has = mean_fit.counts[i] > 0
+        remainders = []
+        for p, m in zip(params, means, strict=True):
+            rem = m - (p[0] + p[1] * np.cos(grid) + p[2] * np.sin(grid))
+            remainders.append(np.interp(grid, grid[has], rem[has], period=2 * np.pi))
+        for b, t0 in noise._spans(cyc, segmentation.period_s):
+            lo, hi = np.searchsorted(t_s, t0)
+            phi = segmentation.phi(blocks[b], t_s[lo:hi])
+            c, s = np.cos(phi), np.sin(phi)
+            res = np.empty((hi - lo, 2))
+            for axis, (p, rem) in enumerate(zip(params, remainders, strict=True)):
+                model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
+                model += np.interp(np.mod(phi, 2 * np.pi), grid, rem, period=2 * np.pi)
+                res[:, axis] = raw[lo:hi, axis] - model
+            ok = valid[lo:hi]
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+            out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
+    return out
 
 
 @pytest.fixture
@@ -128,6 +191,10 @@ def reference_paths(monkeypatch):
 
     def use():
         monkeypatch.setattr(segment, "_rotation", _rotation_reference)
+        monkeypatch.setattr(segment, "_magnitude", lambda r: np.hypot(r[:, 0], r[:, 1]))
+        monkeypatch.setattr(noise, "_periodogram_sum", _periodogram_sum_reference)
+        monkeypatch.setattr(noise, "model_residual", _model_residual_reference)
+        monkeypatch.setattr(filter_module, "lowpass", _lowpass_reference)
         for module in (segment, noise):
             if hasattr(module, "median"):
                 monkeypatch.setattr(module, "median", lambda a: float(np.median(a)))

@@ -33,6 +33,7 @@ bound for the paper's 0.16 Hz circle and a 0.5 Hz corner.
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 
 from imu_square.pipeline.filter import design_lowpass
@@ -117,6 +118,7 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
         x and y residuals of each run of consecutive valid samples. [m/s^2]
     """
     grid = cycles.phi_grid
+    turn = 2 * np.pi
     period = segmentation.period_s
     blocks = {b.plan.index: b for b in segmentation.blocks}
     t_s, raw, valid = filtered.t_s, filtered.raw, filtered.valid
@@ -128,21 +130,37 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
         remainders = []
         for p, m in zip(params, means, strict=True):
             rem = m - (p[0] + p[1] * np.cos(grid) + p[2] * np.sin(grid))
-            remainders.append(np.interp(grid, grid[has], rem[has], period=2 * np.pi))
+            remainders.append(np.interp(grid, grid[has], rem[has], period=turn))
+        # Both axes' remainders as one complex table, wrapped as np.interp(period=) does:
+        # one search of the table per sample for both axes.
+        table_phi, table_rem = _periodic_table(grid, remainders[0] + 1j * remainders[1], turn)
         for b, t0 in _spans(cyc, period):
             block = blocks[b]
             lo, hi = np.searchsorted(t_s, t0)
             phi = segmentation.phi(block, t_s[lo:hi])
             c, s = np.cos(phi), np.sin(phi)
+            rem = np.interp(np.mod(phi, turn) % turn, table_phi, table_rem)
             res = np.empty((hi - lo, 2))
-            for axis, (p, rem) in enumerate(zip(params, remainders, strict=True)):
+            for axis, (p, r) in enumerate(zip(params, (rem.real, rem.imag), strict=True)):
                 model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
-                model += np.interp(np.mod(phi, 2 * np.pi), grid, rem, period=2 * np.pi)
+                model += r
                 res[:, axis] = raw[lo:hi, axis] - model
             ok = valid[lo:hi]
             edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
             out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
     return out
+
+
+def _periodic_table(xp, fp, period):
+    """``(xp, fp)`` wrapped so that ``np.interp(x % period, *table)`` is ``np.interp(x, xp, fp,
+    period=period)``: what numpy does on every call, done once."""
+    xp = np.asarray(xp, dtype=np.float64) % period
+    order = np.argsort(xp)
+    xp, fp = xp[order], fp[order]
+    return (
+        np.concatenate((xp[-1:] - period, xp, xp[0:1] + period)),
+        np.concatenate((fp[-1:], fp, fp[0:1])),
+    )
 
 
 def _spans(cyc, period):
@@ -206,14 +224,16 @@ def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency
     if nperseg < sample_rate_hz / circle_frequency_hz:
         return float("nan")
     total, n_avg = 0.0, 0
+    window = signal.get_window("hann", nperseg)
     for r in residuals:
         if r.shape[0] < nperseg:
             continue
-        f, p = signal.welch(r, fs=sample_rate_hz, nperseg=nperseg, axis=0)
-        k = 1 + (r.shape[0] - nperseg) // (nperseg // 2)
-        total = total + k * p.sum(axis=1)
-        n_avg += k * r.shape[1]
-    psd = total / n_avg
+        p = _periodogram_sum(r, window)
+        total = total + p
+        n_avg += (1 + (r.shape[0] - nperseg) // (nperseg // 2)) * r.shape[1]
+    f = np.fft.rfftfreq(nperseg, 1 / sample_rate_hz)
+    psd = total / (n_avg * sample_rate_hz * np.sum(window**2))
+    psd[1 : (nperseg + 1) // 2] *= 2  # one-sided: all but 0 and fs / 2 twice
     band = (f >= 2 * f[1]) & (f <= max_frequency_hz)
     if np.count_nonzero(band) < 4:
         return float("nan")
@@ -229,6 +249,23 @@ def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency
     if coef[0] <= 0 or coef[1] < _FLICKER_SIGNIFICANCE * np.sqrt(cov[1, 1]):
         return 0.0
     return float(coef[1] / coef[0])
+
+
+def _periodogram_sum(r, window):
+    """Sum over axes and half-overlapping segments of ``|rfft(window * (segment - mean))|^2``.
+
+    What ``scipy.signal.welch(r, nperseg=window.size, axis=0)`` averages (its
+    defaults: Hann window, half overlap, constant detrend, density scaling
+    applied by the caller), with every segment of every axis in one batched FFT
+    instead of its per-segment detrending: a quarter of the time.
+    """
+    n = window.size
+    by_axis = np.ascontiguousarray(r.T)  # segments contiguous: 40 times faster means
+    frames = np.lib.stride_tricks.sliding_window_view(by_axis, n, axis=-1)[:, :: n // 2]
+    frames = frames - frames.mean(axis=-1, keepdims=True)
+    frames *= window
+    spec = sp_fft.rfft(frames, axis=-1)
+    return np.sum(spec.real**2 + spec.imag**2, axis=(0, 1))
 
 
 def mean_removal_factor(cutoff_hz, order, sample_rate_hz, n_cycles):
