@@ -20,7 +20,7 @@ from hypothesis.extra.numpy import arrays
 from scipy import signal
 
 from imu_square.pipeline import filter as filter_module
-from imu_square.pipeline import noise, order_stats, segment
+from imu_square.pipeline import fit, noise, order_stats, segment
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import TestProgram
 from imu_square.simulate import SensorModel, simulate_run, with_effects
@@ -55,9 +55,31 @@ def test_column_medians_are_numpys_bit_for_bit(a):
     np.testing.assert_array_equal(order_stats.column_medians(a), np.median(a, axis=0))
 
 
+rows = arrays(np.float64, st.tuples(st.integers(1, 5), st.integers(1, 40)), elements=floats) | (
+    arrays(
+        np.float64,
+        st.tuples(st.integers(1, 5), st.integers(1, 40)),
+        elements=st.sampled_from([0.0, 1.0, -2.5, np.nan]),
+    )
+)
+
+
+@given(rows)
+def test_row_medians_are_numpys_bit_for_bit(a):
+    np.testing.assert_array_equal(order_stats.row_medians(a), np.median(a, axis=-1))
+
+
 @given(values, st.floats(0.0, 1.0))
 def test_quantile_is_numpys_bit_for_bit(a, q):
     assert _same(order_stats.quantile(a, q), float(np.quantile(a, q)))
+
+
+@given(arrays(np.float64, st.integers(1, 50), elements=st.floats(-20, 20)), st.floats(1.0, 6.0))
+def test_tukey_psi_and_its_derivative_are_statsmodels(z, c):
+    norm = fit.robust_norm("tukey", c)
+    psi, dpsi = fit._psi_and_deriv(norm, z)
+    np.testing.assert_allclose(psi, norm.psi(z), rtol=1e-13, atol=1e-300)
+    np.testing.assert_allclose(dpsi, norm.psi_deriv(z), rtol=1e-12, atol=1e-12)
 
 
 def _rotation_reference(t, rel, period):
@@ -200,6 +222,8 @@ def reference_paths(monkeypatch):
                 monkeypatch.setattr(module, "median", lambda a: float(np.median(a)))
             monkeypatch.setattr(module, "column_medians", lambda a: np.median(a, axis=0))
         monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
+        monkeypatch.setattr(fit, "row_medians", lambda a: np.median(a, axis=-1))
+        monkeypatch.setattr(fit, "_psi_and_deriv", lambda m, z: (m.psi(z), m.psi_deriv(z)))
 
     return use
 
