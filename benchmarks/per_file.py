@@ -10,8 +10,10 @@ baseline (a detached git worktree of ``--baseline-commit`` under /tmp, or
 alternates too), so that the machine's load hits both alike. Each stage is
 timed by wrapping the functions ``analyze`` calls (read, filter, segment,
 cycles, fits, noise floor; "other" is the rest of ``analyze``). The table
-gives the medians and the ratio new/old of the medians; the two results are
-compared too (difference of ``theta_y - theta_x`` over the Cramér-Rao bound).
+gives the medians and the ratio new/old of the medians, wall time by stage and
+the process's CPU time in total (less inflated by a loaded machine's waiting:
+the nearer to a quiet core); the two results are compared too (difference of
+``theta_y - theta_x`` over the Cramér-Rao bound).
 
 Usage::
 
@@ -32,7 +34,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results" / "per_file.json"
-STAGES = ("read", "filter", "segment", "cycles", "fits", "noise", "other", "total")
+STAGES = ("read", "filter", "segment", "cycles", "fits", "noise", "other", "total", "total_cpu")
 
 WORKER = r"""
 import json, sys, time
@@ -58,13 +60,14 @@ for name, stage in (("filter_recording", "filter"), ("segment", "segment"),
 options = AnalysisSettings().options()
 for line in sys.stdin:
     spent.clear()
-    t0 = time.perf_counter()
+    c0, t0 = time.process_time(), time.perf_counter()
     rec = read_mcap(path)
     t1 = time.perf_counter()
     res = sq.analyze(rec, options)
-    t2 = time.perf_counter()
+    t2, c2 = time.perf_counter(), time.process_time()
+    spent["total_cpu"] = c2 - c0
     spent["read"] = t1 - t0
-    spent["other"] = (t2 - t1) - sum(v for k, v in spent.items() if k != "read")
+    spent["other"] = (t2 - t1) - sum(v for k, v in spent.items() if k not in ("read", "total_cpu"))
     spent["total"] = t2 - t0
     out = {"times": spent, "squareness_rad": res.squareness_rad, "crb_rad": res.crb_rad,
            "eps_c_rad": res.eps_c_rad, "u_squareness_rad": res.u_squareness_rad,
