@@ -234,7 +234,7 @@ def _phase_slope(u, dev, omega):
     """Slope of a least-squares line plus ripples at omega and 2 omega through ``dev``. [rad/s]
 
     By the normal equations of the basis with time scaled to [-1, 1] (a 6 x 6
-    Gram matrix, condition about 3 over whole circles): a tenth of the cost of
+    Gram matrix, condition about 3 over whole circles): a quarter of the cost of
     ``np.linalg.lstsq``, which solves it where the Gram matrix is too
     ill-conditioned for that (a window of a fraction of a period).
     """
