@@ -42,6 +42,7 @@ import numpy as np
 from statsmodels.robust import norms
 
 from imu_square.errors import AnalysisError, ImuSquareWarning, check_option
+from imu_square.pipeline.order_stats import row_medians
 
 NORMS = {
     "tukey": norms.TukeyBiweight,
@@ -116,7 +117,7 @@ class FitResult:
 
 def _mad0(resid, present=None):
     if present is None:
-        return np.median(np.abs(resid), axis=-1) / _MAD_TO_SD
+        return row_medians(np.abs(resid)) / _MAD_TO_SD
     return np.nanmedian(np.where(present, np.abs(resid), np.nan), axis=-1) / _MAD_TO_SD
 
 
@@ -132,6 +133,16 @@ def _weights(norm, z):
         u = np.square(z / norm.c)
         return np.where(u <= 1.0, np.square(1.0 - u), 0.0)
     return norm.weights(z)
+
+
+def _psi_and_deriv(norm, z):
+    if type(norm) is norms.TukeyBiweight:  # statsmodels' formulas, their terms computed once
+        v = 1.0 - np.square(z / norm.c)
+        v2 = np.square(v)
+        inside = np.abs(z) <= norm.c
+        psi = np.where(inside, z * v2, 0.0)
+        return psi, np.where(inside, v2 - (4 * np.square(z) / norm.c**2) * v, 0.0)
+    return norm.psi(z), norm.psi_deriv(z)
 
 
 def _solve_weighted(exog, outer, endog, w):
@@ -260,7 +271,10 @@ def fit_irls(
         wp_i = w_i if present is None else w_i * prior[idx]
         p_i = _solve_weighted(exog, outer, endog[idx], wp_i)
         r_i = endog[idx] - p_i @ exog.T
-        weights[idx], params[idx], resid[idx] = w_i, p_i, r_i
+        if isinstance(idx, slice):  # all rows: the new arrays replace the old, no copies
+            weights, params, resid = w_i, p_i, r_i
+        else:
+            weights[idx], params[idx], resid[idx] = w_i, p_i, r_i
         if update_scale:
             new_scale = mad(r_i, idx)
             if freeze_scale_after is not None:
@@ -314,18 +328,18 @@ def _cov_h1(norm, exog, resid, scale, present, prior, outer):
     n, p = exog.shape
     safe = np.where(scale > 0, scale, 1.0)
     sresid = np.where(scale[:, None] > 0, resid / safe[:, None], 0.0)
-    dpsi = norm.psi_deriv(sresid)
+    psi, dpsi = _psi_and_deriv(norm, sresid)
     if present is None:
         m = dpsi.mean(axis=-1)
         k = 1 + p / n * dpsi.var(axis=-1) / m**2
-        ss_psi = np.sum(norm.psi(sresid) ** 2, axis=-1)
+        ss_psi = np.sum(psi**2, axis=-1)
         factor = k**2 * (ss_psi * scale**2 / (n - p)) / m**2
         return factor[:, None, None] * np.linalg.inv(exog.T @ exog)[None]
     n_i = np.count_nonzero(present, axis=-1)
     m = np.sum(dpsi * present, axis=-1) / n_i
     var = np.sum((dpsi - m[:, None]) ** 2 * present, axis=-1) / n_i
     k = 1 + p / n_i * var / m**2
-    ss_psi = np.sum(norm.psi(sresid) ** 2 * present, axis=-1)
+    ss_psi = np.sum(psi**2 * present, axis=-1)
     factor = k**2 * (ss_psi * scale**2 / (n_i - p)) / m**2
     return factor[:, None, None] * np.linalg.inv((prior @ outer).reshape(-1, p, p))
 

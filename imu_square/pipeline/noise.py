@@ -30,12 +30,15 @@ bound for the paper's 0.16 Hz circle and a 0.5 Hz corner.
   error (a white sensor then gets exactly the white bound).
 """
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 
 from imu_square.pipeline.filter import design_lowpass
+from imu_square.pipeline.order_stats import column_medians
 from imu_square.pipeline.uncertainty import cramer_rao
 
 _MAD_TO_SD = 1.4826
@@ -116,6 +119,7 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
         x and y residuals of each run of consecutive valid samples. [m/s^2]
     """
     grid = cycles.phi_grid
+    turn = 2 * np.pi
     period = segmentation.period_s
     blocks = {b.plan.index: b for b in segmentation.blocks}
     t_s, raw, valid = filtered.t_s, filtered.raw, filtered.valid
@@ -127,21 +131,37 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
         remainders = []
         for p, m in zip(params, means, strict=True):
             rem = m - (p[0] + p[1] * np.cos(grid) + p[2] * np.sin(grid))
-            remainders.append(np.interp(grid, grid[has], rem[has], period=2 * np.pi))
+            remainders.append(np.interp(grid, grid[has], rem[has], period=turn))
+        # Both axes' remainders as one complex table, wrapped as np.interp(period=) does:
+        # one search of the table per sample for both axes.
+        table_phi, table_rem = _periodic_table(grid, remainders[0] + 1j * remainders[1], turn)
         for b, t0 in _spans(cyc, period):
             block = blocks[b]
             lo, hi = np.searchsorted(t_s, t0)
             phi = segmentation.phi(block, t_s[lo:hi])
             c, s = np.cos(phi), np.sin(phi)
+            rem = np.interp(np.mod(phi, turn) % turn, table_phi, table_rem)
             res = np.empty((hi - lo, 2))
-            for axis, (p, rem) in enumerate(zip(params, remainders, strict=True)):
+            for axis, (p, r) in enumerate(zip(params, (rem.real, rem.imag), strict=True)):
                 model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
-                model += np.interp(np.mod(phi, 2 * np.pi), grid, rem, period=2 * np.pi)
+                model += r
                 res[:, axis] = raw[lo:hi, axis] - model
             ok = valid[lo:hi]
             edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
             out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
     return out
+
+
+def _periodic_table(xp, fp, period):
+    """``(xp, fp)`` wrapped so that ``np.interp(x % period, *table)`` is ``np.interp(x, xp, fp,
+    period=period)``: what numpy does on every call, done once."""
+    xp = np.asarray(xp, dtype=np.float64) % period
+    order = np.argsort(xp)
+    xp, fp = xp[order], fp[order]
+    return (
+        np.concatenate((xp[-1:] - period, xp, xp[0:1] + period)),
+        np.concatenate((fp[-1:], fp, fp[0:1])),
+    )
 
 
 def _spans(cyc, period):
@@ -173,8 +193,8 @@ def white_density(residuals, sample_rate_hz):
         RMS over the axes of ``sd / sqrt(fs / 2)``; an overestimate where the
         data hold vibration the model does not. [m/s^2/sqrt(Hz)]
     """
-    r = np.concatenate(residuals)
-    sd = _MAD_TO_SD * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+    r = np.concatenate(residuals, axis=0).T.copy()  # one contiguous row per axis
+    sd = _MAD_TO_SD * column_medians(np.abs(r - column_medians(r.T)[:, None]).T)
     return float(np.sqrt(np.mean(sd**2) / (sample_rate_hz / 2)))
 
 
@@ -205,14 +225,16 @@ def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency
     if nperseg < sample_rate_hz / circle_frequency_hz:
         return float("nan")
     total, n_avg = 0.0, 0
+    window = signal.get_window("hann", nperseg)
     for r in residuals:
         if r.shape[0] < nperseg:
             continue
-        f, p = signal.welch(r, fs=sample_rate_hz, nperseg=nperseg, axis=0)
-        k = 1 + (r.shape[0] - nperseg) // (nperseg // 2)
-        total = total + k * p.sum(axis=1)
-        n_avg += k * r.shape[1]
-    psd = total / n_avg
+        p = _periodogram_sum(r, window)
+        total = total + p
+        n_avg += (1 + (r.shape[0] - nperseg) // (nperseg // 2)) * r.shape[1]
+    f = np.fft.rfftfreq(nperseg, 1 / sample_rate_hz)
+    psd = total / (n_avg * sample_rate_hz * np.sum(window**2))
+    psd[1 : (nperseg + 1) // 2] *= 2  # one-sided: all but 0 and fs / 2 twice
     band = (f >= 2 * f[1]) & (f <= max_frequency_hz)
     if np.count_nonzero(band) < 4:
         return float("nan")
@@ -228,6 +250,23 @@ def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency
     if coef[0] <= 0 or coef[1] < _FLICKER_SIGNIFICANCE * np.sqrt(cov[1, 1]):
         return 0.0
     return float(coef[1] / coef[0])
+
+
+def _periodogram_sum(r, window):
+    """Sum over axes and half-overlapping segments of ``|rfft(window * (segment - mean))|^2``.
+
+    What ``scipy.signal.welch(r, nperseg=window.size, axis=0)`` averages (its
+    defaults: Hann window, half overlap, constant detrend, density scaling
+    applied by the caller), with every segment of every axis in one batched FFT
+    instead of its per-segment detrending: a quarter of the time.
+    """
+    n = window.size
+    by_axis = np.ascontiguousarray(r.T)  # segments contiguous: 40 times faster means
+    frames = np.lib.stride_tricks.sliding_window_view(by_axis, n, axis=-1)[:, :: n // 2]
+    frames = frames - frames.mean(axis=-1, keepdims=True)
+    frames *= window
+    spec = sp_fft.rfft(frames, axis=-1)
+    return np.sum(spec.real**2 + spec.imag**2, axis=(0, 1))
 
 
 def mean_removal_factor(cutoff_hz, order, sample_rate_hz, n_cycles):
@@ -253,12 +292,19 @@ def mean_removal_factor(cutoff_hz, order, sample_rate_hz, n_cycles):
     -------
     float
     """
+    h0, h2 = _response_integrals(float(cutoff_hz), int(order), float(sample_rate_hz))
+    return float(1.0 - (2 * h0 - h2) / n_cycles)
+
+
+@functools.lru_cache(maxsize=64)
+def _response_integrals(cutoff_hz, order, sample_rate_hz):
+    """``h_0`` and ``sum h^2`` of the forward-backward filter: the same for every file."""
     sos = design_lowpass(cutoff_hz, order, sample_rate_hz)
     f, h = signal.sosfreqz(sos, worN=1 << 14, fs=sample_rate_hz)
     g = np.abs(h) ** 2
     h0 = np.trapezoid(g, f) / (sample_rate_hz / 2)
     h2 = np.trapezoid(g**2, f) / (sample_rate_hz / 2)
-    return float(1.0 - (2 * h0 - h2) / n_cycles)
+    return float(h0), float(h2)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,201 @@
+"""Per-file cost of the analysis, stage by stage, today's code against a baseline commit.
+
+One recording of the paper's test (``TestProgram()``, 200 s at 1 kHz, with the
+``servo_mismatch`` effect; made once into a temporary folder) is analysed from
+``read_mcap`` to the ``RunResult`` of ``analyze`` with the monitor's options
+(``AnalysisSettings().options()``: 4 Hz, order 1, 200 bootstrap resamples), by
+two long-lived worker processes: one importing this checkout, one importing the
+baseline (a detached git worktree of ``--baseline-commit`` under /tmp, or
+``--baseline PATH``). The runs alternate between the two (which goes first
+alternates too), so that the machine's load hits both alike. Each stage is
+timed by wrapping the functions ``analyze`` calls (read, filter, segment,
+cycles, fits, noise floor; "other" is the rest of ``analyze``). The table
+gives the medians and the ratio new/old of the medians, wall time by stage and
+the process's CPU time in total (less inflated by a loaded machine's waiting:
+the nearer to a quiet core); the two results are compared too (difference of
+``theta_y - theta_x`` over the Cramér-Rao bound).
+
+Usage::
+
+    python benchmarks/per_file.py [--runs 21] [--baseline PATH] [--baseline-commit 28f8832]
+
+Writes ``benchmarks/results/per_file.json``.
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+RESULTS = HERE / "results" / "per_file.json"
+STAGES = ("read", "filter", "segment", "cycles", "fits", "noise", "other", "total", "total_cpu")
+
+WORKER = r"""
+import json, sys, time
+import imu_square.pipeline.squareness as sq
+from imu_square.io.mcap import read_mcap
+from imu_square.monitor.config import AnalysisSettings
+
+path = sys.argv[1]
+spent = {}
+def timed(stage, fn):
+    def wrapper(*args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            spent[stage] = spent.get(stage, 0.0) + time.perf_counter() - t
+    return wrapper
+for name, stage in (("filter_recording", "filter"), ("segment", "segment"),
+                    ("cycle_traces", "cycles"), ("fit_mean_traces", "fits"),
+                    ("fit_cycles", "fits"), ("fit_cross_terms", "fits"),
+                    ("noise_floor", "noise")):
+    setattr(sq, name, timed(stage, getattr(sq, name)))
+options = AnalysisSettings().options()
+for line in sys.stdin:
+    spent.clear()
+    c0, t0 = time.process_time(), time.perf_counter()
+    rec = read_mcap(path)
+    t1 = time.perf_counter()
+    res = sq.analyze(rec, options)
+    t2, c2 = time.perf_counter(), time.process_time()
+    spent["total_cpu"] = c2 - c0
+    spent["read"] = t1 - t0
+    spent["other"] = (t2 - t1) - sum(v for k, v in spent.items() if k not in ("read", "total_cpu"))
+    spent["total"] = t2 - t0
+    out = {"times": spent, "squareness_rad": res.squareness_rad, "crb_rad": res.crb_rad,
+           "eps_c_rad": res.eps_c_rad, "u_squareness_rad": res.u_squareness_rad,
+           "u_bootstrap_rad": res.u_squareness_bootstrap_rad, "period_s": res.period_s}
+    print(json.dumps(out), flush=True)
+"""
+
+
+def make_recording(path, seed):
+    """The paper's test with a servo mismatch, 200 s at 1 kHz, written as MCAP."""
+    from imu_square.io.mcap import write_mcap
+    from imu_square.program import TestProgram
+    from imu_square.simulate import simulate_run, with_effects
+
+    rec, _ = simulate_run(TestProgram(), *with_effects(["servo_mismatch"]), seed=seed)
+    write_mcap(rec, path)
+    return rec.duration_s, rec.n_samples
+
+
+def baseline_tree(commit):
+    """A detached worktree of ``commit`` under /tmp, made once."""
+    path = Path(tempfile.gettempdir()) / f"per_file_old_{commit}"
+    if not path.exists():
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(path), commit],
+            check=True,
+            capture_output=True,
+        )
+    return path
+
+
+def start_worker(code_root, mcap):
+    env = dict(os.environ, PYTHONPATH=str(code_root), OPENBLAS_NUM_THREADS="1")
+    env.setdefault("OMP_NUM_THREADS", "1")
+    return subprocess.Popen(
+        [sys.executable, "-c", WORKER, str(mcap)],
+        cwd=str(code_root),
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+
+def ask(worker):
+    worker.stdin.write("run\n")
+    worker.stdin.flush()
+    line = worker.stdout.readline()
+    if not line:
+        raise RuntimeError("a worker died; run it by hand to see why")
+    return json.loads(line)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=21, help="timed runs per side (>= 15)")
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--baseline", help="source tree of the old code (default: a worktree)")
+    parser.add_argument("--baseline-commit", default="28f8832")
+    args = parser.parse_args(argv)
+    old_root = Path(args.baseline) if args.baseline else baseline_tree(args.baseline_commit)
+    load_before = os.getloadavg()
+    with tempfile.TemporaryDirectory(prefix="imu-per-file-") as tmp:
+        mcap = Path(tmp) / "run.mcap"
+        duration, n = make_recording(mcap, args.seed)
+        size_mb = mcap.stat().st_size / 1e6
+        workers = {"old": start_worker(old_root, mcap), "new": start_worker(ROOT, mcap)}
+        try:
+            for _ in range(args.warmup):
+                for w in workers.values():
+                    ask(w)
+            runs = {"old": [], "new": []}
+            for i in range(args.runs):
+                order = ("old", "new") if i % 2 == 0 else ("new", "old")
+                for side in order:
+                    runs[side].append(ask(workers[side]))
+        finally:
+            for w in workers.values():
+                w.stdin.close()
+                w.wait(timeout=30)
+    load_after = os.getloadavg()
+    medians = {
+        side: {s: statistics.median(r["times"].get(s, 0.0) for r in runs[side]) for s in STAGES}
+        for side in runs
+    }
+    ratio_runs = [
+        b["times"]["total"] / a["times"]["total"]
+        for a, b in zip(runs["old"], runs["new"], strict=True)
+    ]
+    old, new = runs["old"][-1], runs["new"][-1]
+    result = {
+        "recording": {"duration_s": duration, "samples": n, "mb": size_mb, "seed": args.seed},
+        "baseline": str(old_root),
+        "runs": args.runs,
+        "load_before": load_before,
+        "load_after": load_after,
+        "median_s": medians,
+        "ratio_new_over_old": {
+            s: medians["new"][s] / medians["old"][s] if medians["old"][s] else None for s in STAGES
+        },
+        "ratio_total_median_of_pairs": statistics.median(ratio_runs),
+        "difference": {
+            "squareness_over_crb": (new["squareness_rad"] - old["squareness_rad"]) / old["crb_rad"],
+            "eps_c_rad": new["eps_c_rad"] - old["eps_c_rad"],
+            "u_squareness_rel": new["u_squareness_rad"] / old["u_squareness_rad"] - 1,
+            "u_bootstrap_rel": new["u_bootstrap_rad"] / old["u_bootstrap_rad"] - 1,
+            "period_rel": new["period_s"] / old["period_s"] - 1,
+        },
+    }
+    print(
+        f"{duration:.0f} s at {n / duration:.0f} Hz, {args.runs} interleaved runs per side, "
+        f"load {load_before[0]:.2f} -> {load_after[0]:.2f} (1-min average, 2 cores)"
+    )
+    print(f"{'stage':10s} {'old [ms]':>10s} {'new [ms]':>10s} {'new/old':>8s}")
+    for s in STAGES:
+        o, w = 1e3 * medians["old"][s], 1e3 * medians["new"][s]
+        print(f"{s:10s} {o:10.1f} {w:10.1f} {w / o if o else float('nan'):8.2f}")
+    print(f"median over pairs of total new/old: {result['ratio_total_median_of_pairs']:.2f}")
+    d = result["difference"]
+    print(
+        f"results: squareness differs by {d['squareness_over_crb']:.1e} CRB, eps_c by "
+        f"{d['eps_c_rad']:.1e} rad, u by {d['u_squareness_rel']:.1e} (relative)"
+    )
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(result, indent=1))
+    print(f"wrote {RESULTS}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,293 @@
+"""The pipeline's fast paths give the numbers of the library calls they replace.
+
+Each fast path (medians and quantiles by one partial sort, the phase fit by
+normal equations, ...) is held against the numpy/scipy call it replaces, and
+the whole analysis is run twice, once with every fast path swapped back for
+its reference, on several recordings: different seeds and effects, gaps, no
+block markers, a fast circle. The two must agree to round-off: 1e-3 of the
+Cramér-Rao bound for the squareness, far below anything the data can tell.
+"""
+
+import itertools
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy import signal
+
+from imu_square.pipeline import filter as filter_module
+from imu_square.pipeline import fit, noise, order_stats, segment
+from imu_square.pipeline.squareness import AnalysisOptions, analyze
+from imu_square.program import TestProgram
+from imu_square.simulate import SensorModel, simulate_run, with_effects
+from imu_square.units import UG
+
+SHORT = TestProgram(cycles_per_direction=4, dwell_s=1.0)
+OPTIONS = AnalysisOptions(cutoff_hz=4.0, bootstrap_n=50)
+
+floats = st.floats(-1e6, 1e6, allow_nan=False, width=64)
+values = arrays(np.float64, st.integers(1, 60), elements=floats) | arrays(
+    np.float64, st.integers(1, 60), elements=st.sampled_from([0.0, 1.0, -2.5, np.nan])
+)
+
+
+def _same(a, b):
+    return (math.isnan(a) and math.isnan(b)) or a == b
+
+
+@given(values)
+def test_median_is_numpys_bit_for_bit(a):
+    assert _same(order_stats.median(a), float(np.median(a)))
+
+
+def test_median_of_nothing_is_nan_as_numpys():
+    with pytest.warns(RuntimeWarning):
+        expected = np.median(np.array([]))
+    assert math.isnan(expected) and math.isnan(order_stats.median(np.array([])))
+
+
+@given(arrays(np.float64, st.tuples(st.integers(1, 40), st.integers(1, 3)), elements=floats))
+def test_column_medians_are_numpys_bit_for_bit(a):
+    np.testing.assert_array_equal(order_stats.column_medians(a), np.median(a, axis=0))
+
+
+rows = arrays(np.float64, st.tuples(st.integers(1, 5), st.integers(1, 40)), elements=floats) | (
+    arrays(
+        np.float64,
+        st.tuples(st.integers(1, 5), st.integers(1, 40)),
+        elements=st.sampled_from([0.0, 1.0, -2.5, np.nan]),
+    )
+)
+
+
+@given(rows)
+def test_row_medians_are_numpys_bit_for_bit(a):
+    np.testing.assert_array_equal(order_stats.row_medians(a), np.median(a, axis=-1))
+
+
+@given(values, st.floats(0.0, 1.0))
+def test_quantile_is_numpys_bit_for_bit(a, q):
+    assert _same(order_stats.quantile(a, q), float(np.quantile(a, q)))
+
+
+@given(arrays(np.float64, st.integers(1, 50), elements=st.floats(-20, 20)), st.floats(1.0, 6.0))
+def test_tukey_psi_and_its_derivative_are_statsmodels(z, c):
+    norm = fit.robust_norm("tukey", c)
+    psi, dpsi = fit._psi_and_deriv(norm, z)
+    np.testing.assert_allclose(psi, norm.psi(z), rtol=1e-13, atol=1e-300)
+    np.testing.assert_allclose(dpsi, norm.psi_deriv(z), rtol=1e-12, atol=1e-12)
+
+
+def _rotation_reference(t, rel, period):
+    """segment._rotation before it was made fast (commit 28f8832): complex phases, lstsq."""
+    z = rel[:, 0] + 1j * rel[:, 1]
+    dt = float(np.median(np.diff(t)))
+    lag = max(1, round(period / 8 / dt))
+    if z.size <= lag + 2:
+        return 0.0, 1.0
+    rates = np.angle(z[lag:] * np.conj(z[:-lag])) / (t[lag:] - t[:-lag])
+    omega0 = float(np.median(rates))
+    tm = 0.5 * (t[0] + t[-1])
+    resid = np.angle(z * np.exp(-1j * omega0 * (t - tm)))
+    dev = np.angle(np.exp(1j * (resid - np.median(resid))))
+    good = np.abs(dev) < segment._MAX_PHASE_DEVIATION
+    if np.count_nonzero(good) < 3:
+        return omega0, 1.0
+    u = t[good] - tm
+    w = omega0 * u
+    design = np.column_stack(
+        [np.ones_like(u), u, np.cos(w), np.sin(w), np.cos(2 * w), np.sin(2 * w)]
+    )
+    slope = np.linalg.lstsq(design, dev[good], rcond=None)[0][1]
+    return omega0 + float(slope), 1.0 - float(np.mean(good))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    omega=st.floats(-6.0, 6.0).filter(lambda w: abs(w) > 0.05),
+    periods=st.floats(0.2, 12.0),
+    ellipse=st.floats(0.0, 0.3),
+    noise=st.floats(0.0, 0.5),
+    gap=st.booleans(),
+    seed=st.integers(0, 2**16),
+)
+def test_phase_fit_matches_lstsq(omega, periods, ellipse, noise, gap, seed):
+    # Whole circles (condition about 3) down to a fifth of one (lstsq takes over),
+    # off-circle samples and a gap: the same speed and off-circle fraction.
+    rng = np.random.default_rng(seed)
+    period = 2 * np.pi / abs(omega)
+    t = np.arange(0.0, periods * period, 1e-3)
+    if gap:
+        t = np.delete(t, np.s_[t.size // 3 : t.size // 3 + t.size // 10])
+    phi = omega * t + 0.3 + 0.05 * np.sin(2 * omega * t)
+    rel = np.column_stack([(1 + ellipse) * np.cos(phi), np.sin(phi)])
+    rel += noise * rng.standard_normal(rel.shape)
+    fast, off = segment._rotation(t, rel, period)
+    ref, off_ref = _rotation_reference(t, rel, period)
+    assert off == pytest.approx(off_ref, abs=2 / t.size)  # a sample at 0.5 rad may flip
+    assert fast == pytest.approx(ref, rel=1e-9, abs=1e-12)
+
+
+def _periodogram_sum_reference(r, window):
+    """noise._periodogram_sum from scipy.signal.welch, its scaling undone."""
+    n = window.size
+    _, p = signal.welch(r, fs=1.0, window=window, nperseg=n, axis=0)
+    p = p * (1 + (r.shape[0] - n) // (n // 2)) * np.sum(window**2)
+    p[1 : (n + 1) // 2] /= 2
+    return p.sum(axis=1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n=st.integers(64, 3000),
+    log_seg=st.integers(3, 6),
+    axes=st.integers(1, 3),
+    seed=st.integers(0, 99),
+)
+def test_periodogram_sum_is_scipys_welch(n, log_seg, axes, seed):
+    r = np.random.default_rng(seed).standard_normal((n, axes)).cumsum(axis=0)
+    window = signal.get_window("hann", 1 << log_seg)
+    np.testing.assert_allclose(
+        noise._periodogram_sum(r, window), _periodogram_sum_reference(r, window), rtol=1e-10
+    )
+
+
+def _lowpass_reference(data, cutoff_hz, order, sample_rate_hz, breaks=()):
+    """filter.lowpass before (commit 28f8832): sosfiltfilt along axis 0."""
+    sos = filter_module.design_lowpass(cutoff_hz, order, sample_rate_hz)
+    data = np.asarray(data, dtype=np.float64)
+    out = data.copy()
+    edges = [0, *sorted(int(b) for b in breaks), data.shape[0]]
+    for a, b in itertools.pairwise(edges):
+        if b - a > 3 * (2 * sos.shape[0] + 1):
+            out[a:b] = signal.sosfiltfilt(sos, data[a:b], axis=0)
+    return out
+
+
+@pytest.mark.parametrize("shape", [(5000,), (5000, 2), (5000, 3)])
+@pytest.mark.parametrize("order", [1, 4])
+def test_lowpass_channel_by_channel_is_bit_for_bit(shape, order):
+    data = np.random.default_rng(order).standard_normal(shape)[:, ...]
+    breaks = [7, 1200, 3000]  # a stretch too short to filter, and three filtered
+    fast = filter_module.lowpass(data, 20.0, order, 1000.0, breaks)
+    assert fast.flags.c_contiguous
+    np.testing.assert_array_equal(fast, _lowpass_reference(data, 20.0, order, 1000.0, breaks))
+
+
+def _model_residual_reference(filtered, segmentation, cycles, mean_fit):
+    """noise.model_residual before (commit 28f8832): np.interp with period=, axis by axis."""
+    grid = cycles.phi_grid
+    blocks = {b.plan.index: b for b in segmentation.blocks}
+    t_s, raw, valid = filtered.t_s, filtered.raw, filtered.valid
+    out = []
+    for i, cyc in enumerate((cycles.ccw, cycles.cw)):
+        params = [mean_fit.fit.x.params[i], mean_fit.fit.y.params[i]]
+        means = [mean_fit.mean_x[i], mean_fit.mean_y[i]]
+        has = mean_fit.counts[i] > 0
+        remainders = []
+        for p, m in zip(params, means, strict=True):
+            rem = m - (p[0] + p[1] * np.cos(grid) + p[2] * np.sin(grid))
+            remainders.append(np.interp(grid, grid[has], rem[has], period=2 * np.pi))
+        for b, t0 in noise._spans(cyc, segmentation.period_s):
+            lo, hi = np.searchsorted(t_s, t0)
+            phi = segmentation.phi(blocks[b], t_s[lo:hi])
+            c, s = np.cos(phi), np.sin(phi)
+            res = np.empty((hi - lo, 2))
+            for axis, (p, rem) in enumerate(zip(params, remainders, strict=True)):
+                model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
+                model += np.interp(np.mod(phi, 2 * np.pi), grid, rem, period=2 * np.pi)
+                res[:, axis] = raw[lo:hi, axis] - model
+            ok = valid[lo:hi]
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+            out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
+    return out
+
+
+@pytest.fixture
+def reference_paths(monkeypatch):
+    """Swap every fast path for the library call it replaces."""
+
+    def use():
+        monkeypatch.setattr(segment, "_rotation", _rotation_reference)
+        monkeypatch.setattr(segment, "_magnitude", lambda r: np.hypot(r[:, 0], r[:, 1]))
+        monkeypatch.setattr(noise, "_periodogram_sum", _periodogram_sum_reference)
+        monkeypatch.setattr(noise, "model_residual", _model_residual_reference)
+        monkeypatch.setattr(filter_module, "lowpass", _lowpass_reference)
+        for module in (segment, noise):
+            if hasattr(module, "median"):
+                monkeypatch.setattr(module, "median", lambda a: float(np.median(a)))
+            monkeypatch.setattr(module, "column_medians", lambda a: np.median(a, axis=0))
+        monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
+        monkeypatch.setattr(fit, "row_medians", lambda a: np.median(a, axis=-1))
+        monkeypatch.setattr(fit, "_psi_and_deriv", lambda m, z: (m.psi(z), m.psi_deriv(z)))
+
+    return use
+
+
+def _drop_short_gaps(rec, fraction, seed):
+    """Lose ``fraction`` of the samples in gaps of 1-9 samples."""
+    rng = np.random.default_rng(seed)
+    keep = np.ones(rec.n_samples, dtype=bool)
+    while 1 - keep.mean() < fraction:
+        start = int(rng.integers(1, rec.n_samples - 10))
+        keep[start : start + int(rng.integers(1, 10))] = False
+    return replace(rec, accel=rec.accel[keep], time_ns=rec.time_ns[keep], seq=rec.seq[keep])
+
+
+def _case(name):
+    sensor = SensorModel(noise_density_m_s2_rthz=100 * UG, flicker_corner_hz=0.5, eps_c_rad=0.1)
+    if name == "servo":
+        return simulate_run(SHORT, *with_effects(["servo_mismatch"], sensor=sensor), seed=3)[0]
+    if name == "spikes_gravity":
+        effects = ["reversal_spikes", "gravity_coupling", "sensor_thermal_drift"]
+        return simulate_run(SHORT, *with_effects(effects, sensor=sensor), seed=4)[0]
+    if name == "vibration_clock_no_events":
+        effects = ["structural_vibration", "sample_clock_error", "servo_mismatch"]
+        rec = simulate_run(SHORT, *with_effects(effects, sensor=sensor), seed=5)[0]
+        return replace(rec, events=[])
+    if name == "short_gaps":
+        rec = simulate_run(SHORT, *with_effects(["servo_mismatch"], sensor=sensor), seed=6)[0]
+        return _drop_short_gaps(rec, 0.02, seed=6)
+    if name == "fast_circle":  # 2.5 m/s^2 (0.25 g) at 2.5 circles per second
+        prog = TestProgram(radius_m=0.016, feed_m_per_s=0.2, cycles_per_direction=8, dwell_s=1)
+        return simulate_run(prog, *with_effects(["backlash"], sensor=sensor), seed=7)[0]
+    raise ValueError(name)
+
+
+@pytest.mark.parametrize(
+    "name", ["servo", "spikes_gravity", "vibration_clock_no_events", "short_gaps", "fast_circle"]
+)
+def test_analysis_equals_the_reference_paths(name, reference_paths):
+    rec = _case(name)
+    fast = analyze(rec, OPTIONS)
+    reference_paths()
+    ref = analyze(rec, OPTIONS)
+    crb = ref.crb_rad
+    assert abs(fast.squareness_rad - ref.squareness_rad) < 1e-3 * crb
+    assert abs(fast.servo_mismatch_rad - ref.servo_mismatch_rad) < 1e-3 * crb
+    assert abs(fast.eps_c_rad - ref.eps_c_rad) < 1e-3 * ref.u_eps_c_rad
+    assert fast.period_s == pytest.approx(ref.period_s, rel=1e-12)
+    assert fast.u_squareness_rad == pytest.approx(ref.u_squareness_rad, rel=1e-6)
+    u_boot = ref.u_squareness_bootstrap_rad
+    assert fast.u_squareness_bootstrap_rad == pytest.approx(u_boot, rel=1e-6)
+    assert fast.u_eps_c_rad == pytest.approx(ref.u_eps_c_rad, rel=1e-6)
+    assert fast.crb_rad == pytest.approx(crb, rel=1e-9)
+    assert fast.noise_density_m_s2_rthz == pytest.approx(ref.noise_density_m_s2_rthz, rel=1e-9)
+    assert _same(fast.flicker_corner_hz, ref.flicker_corner_hz) or fast.flicker_corner_hz == (
+        pytest.approx(ref.flicker_corner_hz, rel=1e-6)
+    )
+    assert fast.cycles_used == ref.cycles_used
+    assert fast.quality.keys() == ref.quality.keys()
+    for key, value in ref.quality.items():  # counts and flags equal, numbers to round-off
+        if isinstance(value, float):
+            assert _same(fast.quality[key], value) or fast.quality[key] == pytest.approx(
+                value, rel=1e-9, abs=1e-12
+            ), key
+        else:
+            assert fast.quality[key] == value, key
+    np.testing.assert_allclose(fast.per_cycle["t_ccw_s"], ref.per_cycle["t_ccw_s"], atol=1e-9)
+    np.testing.assert_allclose(fast.per_cycle["t_cw_s"], ref.per_cycle["t_cw_s"], atol=1e-9)
