@@ -110,6 +110,9 @@ class Night:
         temperature, and the ``correction_rad`` added to its ``theta_y - theta_x``.
     drift_corrected : bool
         Whether the change was corrected.
+    stated : str
+        For a night before the current baseline: the verdict line stored when
+        it was judged (against the baseline of its time).
     """
 
     run: object
@@ -120,6 +123,7 @@ class Night:
     reason: str = ""
     drift: object = None
     drift_corrected: bool = False
+    stated: str = ""
 
 
 @dataclass(frozen=True)
@@ -409,15 +413,17 @@ def _run_drift(runs, in_baseline, before_ns):
 def _earlier(row, evaluation):
     """A run before the current baseline: its verdict of the time, if it was judged."""
     if evaluation is None:
-        return Night(row, "no_baseline", reason="before the current baseline")
+        return Night(row, "no_baseline", reason="recorded before the current baseline")
     nan = math.nan
+    stored = evaluation.statistics or {}
     return Night(
         row,
         evaluation.state,
         nan if evaluation.change_rad is None else evaluation.change_rad,
         nan if evaluation.u_change_rad is None else evaluation.u_change_rad,
         None,
-        "judged against an earlier baseline",
+        stored.get("reason") or "judged against an earlier baseline",
+        stated=stored.get("verdict") or f"{evaluation.state}, judged against an earlier baseline",
     )
 
 
@@ -446,6 +452,8 @@ def verdict(assessment, night):
     -------
     str
     """
+    if night.stated:
+        return night.stated
     since = ""
     if assessment.baseline_row is not None:
         base = assessment.baseline_row
@@ -471,4 +479,6 @@ def verdict(assessment, night):
         return f"invalid run, not judged: {night.reason}"
     if night.state == "stale_baseline":
         return f"baseline stale: {night.reason}"
+    if night.reason:
+        return f"not judged: {night.reason}"
     return "no baseline yet: set one with 'imu-square baseline set' from at least 3 valid runs"

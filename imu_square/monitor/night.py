@@ -302,7 +302,10 @@ def judge_stored(config, history, run_id, inserted=True, result=None):
     night = assessment.night_of(run_id)
     if night.state == "stale_baseline" and baseline_row is not None and not baseline_row.stale:
         history.mark_baseline_stale(baseline_row.id, night.reason, at_ns=night.run.recorded_at_ns)
+    line = verdict(assessment, night)
     statistics = {} if night.chart is None else night.chart.to_json_dict()
+    # read back when a later baseline makes this night one "of its time"
+    statistics.update(verdict=line, reason=night.reason)
     judged = baseline_row is not None and night.state != "no_baseline"
     history.add_evaluation(
         EvaluationRow(
@@ -314,7 +317,6 @@ def judge_stored(config, history, run_id, inserted=True, result=None):
             statistics=statistics,
         )
     )
-    line = verdict(assessment, night)
     record = night_record(assessment, night, line)
     return NightOutcome(run_id, inserted, night.state, line, record, assessment, result)
 
