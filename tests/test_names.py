@@ -97,3 +97,11 @@ def test_separate_gravity_json_keys_match_the_table(tmp_path, capsys):
         "gravity_phase_rad",
         "expected_squareness_rad",
     }
+
+
+def test_sample_recordings_truth_files_carry_todays_keys():
+    # regenerate with recordings/make_recordings.py when the truth gains a key
+    keys, legacy = _documented()
+    for path in sorted(RECORDING.parent.glob("*.truth.json")):
+        truth = json.loads(path.read_text(encoding="utf-8"))
+        assert set(truth) == keys["truth"] | legacy["truth"], path.name
