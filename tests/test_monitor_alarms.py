@@ -568,3 +568,14 @@ def test_far_shifts_and_poor_baselines_stay_finite():
             730, 17e-6, step_rad=30e-6, nu=19, baseline_sd_ratio=ratio, mc_nights=200_000
         )
         assert all(np.isfinite([c.limit for c in d.charts])) and d.check.arl0 > 300
+
+
+def test_a_cusum_that_rests_at_zero_warns_as_soon_as_it_leaves_it():
+    # k = 2.2: C+ or C- is above zero on 4.8 % of t14 nights, so no limit above zero
+    # gives the 5 % asked; the warning is then any night off zero
+    chart = Cusum(2.2, 10.0)
+    assert 0.04 < chart.occupancy(T14)(0.0) < 0.05
+    assert solve_warning(chart, 0.05, T14) == 0.0
+    w = solve_warning(chart, 0.01, T14)
+    assert 0.0 < w < chart.limit
+    assert_allclose(chart.occupancy(T14)(w), 0.01, rtol=1e-7)

@@ -673,4 +673,6 @@ def solve_warning(chart, fraction, law, baseline_sd=0.0, nodes=_BASELINE_NODES):
     hi = chart.limit * (1.0 - 1e-9)
     if excess(hi) >= 0.0:  # even the alarm limit is passed this often: warn there
         return chart.limit
+    if excess(0.0) <= 0.0:  # a CUSUM of large k is at zero on most nights: warn off zero
+        return 0.0
     return optimize.brentq(excess, 0.0, hi, xtol=1e-10, rtol=1e-8)

@@ -23,8 +23,9 @@ of every valid night up to the one judged (never a later one) are pooled,
 inverse-variance weighted; when the pooled slope passes :data:`DRIFT_SIGNIFICANCE`
 standard errors the night is corrected to the baseline runs' mean temperature
 before its change is taken, and the slope's uncertainty enters the change's.
-A night whose sensor warmed by more than :data:`WARMING_RISE_C` during the run
-is not judged while that slope is not known. A regression *across* nights on
+A night whose sensor warmed by more than :data:`WARMING_RISE_C` during the run,
+or faster than :data:`WARMING_RATE_C_PER_MIN`, is not judged while that slope
+is not known. A regression *across* nights on
 the temperature (:func:`~.drift.fit_run_drift`)
 is reported but never used to correct: it cannot tell the sensor's drift from
 a machine change that follows the season. Without a temperature channel a
@@ -52,6 +53,12 @@ WARMING_P = 0.001
 # is not judged while no drift slope is known (a seasonal change of the ambient leaves
 # the run's own temperature steady, and is judged). [degC]
 WARMING_RISE_C = 0.5
+# ... and so is one whose temperature climbs faster than this, by at least the second
+# figure (five steps of the wire's 0.01 °C): a short run can rise less than the figure
+# above while its sensor, just switched on, is far from the baseline's temperature. The
+# ambient changes by a few °C a day, hundreds of times slower. [degC/min], [degC]
+WARMING_RATE_C_PER_MIN = 0.1
+WARMING_MIN_RISE_C = 0.05
 
 
 def iso(ns):
@@ -335,6 +342,13 @@ def _within(row):
     return (row.per_cycle or {}).get("drift")
 
 
+def _run_minutes(row):
+    """From the first sample to the middle of the last analysed cycle. [min]"""
+    per_cycle = row.per_cycle or {}
+    times = [t for key in ("t_ccw_s", "t_cw_s") for t in per_cycle.get(key) or () if t is not None]
+    return max(times) / 60.0 if times else 0.0
+
+
 def _drift_corrections(runs, base_runs):
     """Per valid run id, the drift correction or warm-up flag (module docstring)."""
     valid = [r for r in runs if r.valid]
@@ -365,11 +379,17 @@ def _drift_corrections(runs, base_runs):
             }
         for r in valid:
             rise = (r.temperature_end_c or 0.0) - (r.temperature_start_c or 0.0)
-            if rise > WARMING_RISE_C and not out.get(r.id, {}).get("applied"):
+            minutes = _run_minutes(r)
+            rate = rise / minutes if minutes > 0 else 0.0
+            warming = rise > WARMING_RISE_C or (
+                rise >= WARMING_MIN_RISE_C and rate > WARMING_RATE_C_PER_MIN
+            )
+            if warming and not out.get(r.id, {}).get("applied"):
                 out.setdefault(r.id, {"regressor": "temperature_c", "applied": False})
                 out[r.id]["warming"] = (
-                    f"the sensor was still warming up ({rise:+.1f} °C during the run) and its "
-                    f"drift with the temperature is not known yet: not judged"
+                    f"the sensor was still warming up ({rise:+.2f} °C during the run, "
+                    f"{rate:+.2f} °C/min) and its drift with the temperature is not known "
+                    f"yet: not judged"
                 )
         return out
     for r in valid:
