@@ -31,7 +31,9 @@ is reported but never used to correct: it cannot tell the sensor's drift from
 a machine change that follows the season. Without a temperature channel a
 linear slope against the time since power-on cannot be carried from a cold
 night to a warm baseline: a night whose own within-night drift against it is
-significant (p < :data:`WARMING_P`) is not judged but said to be warming up.
+significant (p < :data:`WARMING_P`), or one switched on sooner than any of the
+baseline's nights and within :data:`WARM_UP_S` of power-on, is not judged but
+said to be warming up.
 """
 
 import math
@@ -59,6 +61,9 @@ WARMING_RISE_C = 0.5
 # ambient changes by a few °C a day, hundreds of times slower. [degC/min], [degC]
 WARMING_RATE_C_PER_MIN = 0.1
 WARMING_MIN_RISE_C = 0.05
+# Without a temperature channel, a night switched on sooner than any baseline night and
+# within this time of power-on is not judged (MEMS sensors warm over minutes). [s]
+WARM_UP_S = 1800.0
 
 
 def iso(ns):
@@ -403,6 +408,27 @@ def _drift_corrections(runs, base_runs):
                     f"{fit['slope_urad_per_unit'] * 60:+.1f} µm/m a minute during the run "
                     f"(p = {fit['p_value']:.1g}), {fit['reference']:.0f} s after power-on; "
                     f"warm it up first, or give it a temperature channel"
+                ),
+            }
+    # Without a temperature channel a drift that is not significant within a short run
+    # can still hold hundreds of µm/m against warm baseline nights: a night switched on
+    # sooner than any of them, and within the warm-up, is not judged.
+    uptimes = [r.time_since_power_on_s for r in base_runs]
+    if base_runs and all(u is not None for u in uptimes):
+        soonest = min(min(uptimes), WARM_UP_S)
+        for r in valid:
+            up = r.time_since_power_on_s
+            if r.id in out or up is None or up >= soonest:
+                continue
+            out[r.id] = {
+                "regressor": "time_since_power_on_s",
+                "applied": False,
+                "warming": (
+                    f"the sensor was switched on {up / 60:.1f} min before the run, sooner than "
+                    f"any of the baseline's nights ({min(uptimes) / 60:.0f} min and more) and "
+                    f"within its first {WARM_UP_S / 60:.0f} min after power-on, and without a "
+                    f"temperature channel its warm-up drift cannot be corrected: warm it up "
+                    f"first, or give it a temperature channel"
                 ),
             }
     return out
