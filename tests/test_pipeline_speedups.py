@@ -20,7 +20,7 @@ from hypothesis.extra.numpy import arrays
 from scipy import signal
 
 from imu_square.pipeline import filter as filter_module
-from imu_square.pipeline import fit, noise, order_stats, segment
+from imu_square.pipeline import fit, noise, order_stats, per_cycle, quality, segment
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import TestProgram
 from imu_square.simulate import SensorModel, simulate_run, with_effects
@@ -132,6 +132,79 @@ def test_phase_fit_matches_lstsq(omega, periods, ellipse, noise, gap, seed):
     assert fast == pytest.approx(ref, rel=1e-9, abs=1e-12)
 
 
+def _phase_slope_basis_reference(u, dev, omega):
+    """segment._phase_slope's normal equations with the basis stacked from temporaries."""
+    half = max(abs(u[0]), abs(u[-1]), np.finfo(float).tiny)
+    c, s = np.cos(omega * u), np.sin(omega * u)
+    basis = np.stack([np.ones_like(u), u / half, c, s, c * c - s * s, 2 * c * s])
+    return float(np.linalg.solve(basis @ basis.T, basis @ dev)[1] / half)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    omega=st.floats(-6.0, 6.0).filter(lambda w: abs(w) > 0.05),
+    periods=st.floats(1.0, 12.0),
+    seed=st.integers(0, 2**16),
+)
+def test_phase_slope_basis_in_place_is_bit_for_bit(omega, periods, seed):
+    rng = np.random.default_rng(seed)
+    u = np.arange(0.0, periods * 2 * np.pi / abs(omega), 1e-3)
+    u -= 0.5 * u[-1]
+    dev = 0.01 * u + 0.02 * np.sin(2 * omega * u) + 0.1 * rng.standard_normal(u.size)
+    assert segment._phase_slope(u, dev, omega) == _phase_slope_basis_reference(u, dev, omega)
+
+
+def _tukey_weights_reference(norm, z):
+    u = np.square(z / norm.c)
+    return np.where(u <= 1.0, np.square(1.0 - u), 0.0)
+
+
+@given(
+    arrays(
+        np.float64,
+        st.integers(1, 50),
+        elements=st.floats(-20, 20) | st.sampled_from([np.nan, np.inf, -np.inf, 0.0, -0.0]),
+    ),
+    st.floats(1.0, 6.0),
+)
+def test_tukey_weights_in_place_are_bit_for_bit_and_statsmodels(z, c):
+    norm = fit.robust_norm("tukey", c)
+    fast = fit._weights(norm, z)
+    np.testing.assert_array_equal(fast, _tukey_weights_reference(norm, z))
+    finite = np.isfinite(z)
+    np.testing.assert_allclose(fast[finite], norm.weights(z[finite]), rtol=1e-13, atol=1e-300)
+
+
+@pytest.mark.parametrize("complete", [True, False])
+def test_circle_fits_without_covariance_are_the_same_fits(complete):
+    rng = np.random.default_rng(11)
+    phi = np.linspace(0, 2 * np.pi, 360, endpoint=False)
+    ax = 1 + 3 * np.cos(phi - 0.01) + 0.05 * rng.standard_normal((40, phi.size))
+    ay = -3 * np.sin(phi - 0.02) + 0.05 * rng.standard_normal((40, phi.size))
+    ax[:, 7] += 2.0  # an outlier the robust norm weighs down
+    prior = None if complete else (rng.random((40, phi.size)) > 0.05).astype(float)
+    full = fit.fit_circle(phi, ax, ay, prior_weights=prior, maxiter=50, tol=1e-8)
+    lean = fit.fit_circle(phi, ax, ay, prior_weights=prior, maxiter=50, tol=1e-8, covariance=False)
+    for a, b in ((full.x, lean.x), (full.y, lean.y)):
+        np.testing.assert_array_equal(a.params, b.params)
+        np.testing.assert_array_equal(a.scale, b.scale)
+        np.testing.assert_array_equal(a.iterations, b.iterations)
+        assert np.all(np.isnan(b.cov)) and np.all(np.isnan(b.bse))
+    np.testing.assert_array_equal(full.squareness, lean.squareness)
+    np.testing.assert_array_equal(full.mean_phase, lean.mean_phase)
+    assert np.all(np.isnan(lean.u_theta_x)) and np.all(np.isfinite(full.u_theta_x))
+
+
+def test_clipped_times_with_a_valid_mask_are_those_of_the_valid_samples():
+    rng = np.random.default_rng(2)
+    t = np.arange(5000) * 1e-3
+    raw = rng.normal(0, 10, (5000, 3))
+    valid = rng.random(5000) > 0.1
+    clipped = quality.clipped_times(t, raw, 20.0, valid)
+    np.testing.assert_array_equal(clipped, quality.clipped_times(t[valid], raw[valid], 20.0))
+    assert 0 < clipped.size < np.count_nonzero(np.any(np.abs(raw) >= 0.999 * 20.0, axis=1))
+
+
 def _periodogram_sum_reference(r, window):
     """noise._periodogram_sum from scipy.signal.welch, its scaling undone."""
     n = window.size
@@ -207,6 +280,24 @@ def _model_residual_reference(filtered, segmentation, cycles, mean_fit):
     return out
 
 
+@pytest.mark.parametrize("name", ["servo", "short_gaps", "fast_circle"])
+def test_model_residual_is_the_reference_to_round_off(name, monkeypatch):
+    seen = []
+    original = noise.model_residual
+
+    def spy(*args):
+        seen.append(args)
+        return original(*args)
+
+    monkeypatch.setattr(noise, "model_residual", spy)
+    analyze(_case(name), OPTIONS)
+    fast = original(*seen[0])
+    ref = _model_residual_reference(*seen[0])
+    assert len(fast) == len(ref) and len(fast) > 0
+    for a, b in zip(fast, ref, strict=True):  # phi's whole turns off by ulps of ~1e3 rad
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
 @pytest.fixture
 def reference_paths(monkeypatch):
     """Swap every fast path for the library call it replaces."""
@@ -224,6 +315,10 @@ def reference_paths(monkeypatch):
         monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
         monkeypatch.setattr(fit, "row_medians", lambda a: np.median(a, axis=-1))
         monkeypatch.setattr(fit, "_psi_and_deriv", lambda m, z: (m.psi(z), m.psi_deriv(z)))
+        monkeypatch.setattr(fit, "_weights", lambda m, z: m.weights(z))
+        monkeypatch.setattr(
+            per_cycle, "fit_circle", lambda *a, covariance, **k: fit.fit_circle(*a, **k)
+        )
 
     return use
 

@@ -239,8 +239,19 @@ def _phase_slope(u, dev, omega):
     ill-conditioned for that (a window of a fraction of a period).
     """
     half = max(abs(u[0]), abs(u[-1]), np.finfo(float).tiny)
-    c, s = np.cos(omega * u), np.sin(omega * u)
-    basis = np.stack([np.ones_like(u), u / half, c, s, c * c - s * s, 2 * c * s])
+    # The rows [1, u / half, c, s, c^2 - s^2, 2 c s] written in place: no temporaries.
+    basis = np.empty((6, u.size))
+    basis[0] = 1.0
+    np.divide(u, half, out=basis[1])
+    c, s, c2, s2 = basis[2], basis[3], basis[4], basis[5]
+    np.multiply(omega, u, out=c2)
+    np.cos(c2, out=c)
+    np.sin(c2, out=s)
+    np.multiply(s, s, out=s2)
+    np.multiply(c, c, out=c2)
+    c2 -= s2
+    np.multiply(2, c, out=s2)
+    s2 *= s
     gram = basis @ basis.T
     if np.linalg.cond(gram) < _MAX_GRAM_CONDITION:
         return float(np.linalg.solve(gram, basis @ dev)[1] / half)
@@ -381,6 +392,11 @@ class Motion:
     def t_stop(self):
         """End of motion of each interval. [s]"""
         return [c[1][0] for c in self.crossings]
+
+    @cached_property
+    def sample_step_s(self):
+        """Median step between samples, found once for all blocks. [s]"""
+        return median(np.diff(self.t_s))
 
     @cached_property
     def senses(self):
@@ -567,7 +583,7 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s
     # within the filter's reach move a crossing, taken as uniform over their
     # total length (over 24 runs with 3 and 10 % lost the error was 0.4 of it).
     sd = spread * level_s  # robust sd of the envelope [m/s^2]
-    quant = median(np.diff(t_s)) / np.sqrt(12)
+    quant = motion.sample_step_s / np.sqrt(12)
     u0 = np.hypot(np.hypot(sd / s0, quant), bridged_near[0] / np.sqrt(12))
     u1 = np.hypot(np.hypot(sd / s1, quant), bridged_near[1] / np.sqrt(12))
     return Block(plan, t0, t1, 0.5 * float(np.hypot(u0, u1)), omega)
