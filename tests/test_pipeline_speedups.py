@@ -386,3 +386,13 @@ def test_analysis_equals_the_reference_paths(name, reference_paths):
             assert fast.quality[key] == value, key
     np.testing.assert_allclose(fast.per_cycle["t_ccw_s"], ref.per_cycle["t_ccw_s"], atol=1e-9)
     np.testing.assert_allclose(fast.per_cycle["t_cw_s"], ref.per_cycle["t_cw_s"], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("cutoff", "order", "fs"), [(4.0, 1, 1000.0), (20.0, 4, 1000.0), (3, 2, 800)]
+)
+def test_lowpass_design_is_scipys_butter_and_a_copy(cutoff, order, fs):
+    reference = signal.butter(order, cutoff, output="sos", fs=fs)
+    first = filter_module.design_lowpass(cutoff, order, fs)
+    first[:] = 0.0  # a caller's change does not reach the next caller
+    np.testing.assert_array_equal(filter_module.design_lowpass(cutoff, order, fs), reference)

@@ -38,6 +38,7 @@ References
    (2019).
 """
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -87,7 +88,14 @@ def design_lowpass(cutoff_hz, order, sample_rate_hz):
         )
     if int(order) != order or not 1 <= order <= 8:
         raise AnalysisError(f"filter order must be a whole number in [1, 8], got {order!r}")
-    return signal.butter(int(order), cutoff_hz, output="sos", fs=sample_rate_hz)
+    return _butter_sos(int(order), float(cutoff_hz), float(sample_rate_hz)).copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _butter_sos(order, cutoff_hz, sample_rate_hz):
+    # scipy's design takes a millisecond, as long as filtering 100k samples, and
+    # every analysis asks for the same few filters (twice each).
+    return signal.butter(order, cutoff_hz, output="sos", fs=sample_rate_hz)
 
 
 def lowpass(data, cutoff_hz, order, sample_rate_hz, breaks=()):
