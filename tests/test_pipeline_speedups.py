@@ -19,8 +19,17 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy import signal
 
+from imu_square.pipeline import (
+    align,
+    fit,
+    noise,
+    order_stats,
+    per_cycle,
+    quality,
+    segment,
+    squareness,
+)
 from imu_square.pipeline import filter as filter_module
-from imu_square.pipeline import fit, noise, order_stats, per_cycle, quality, segment
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import TestProgram
 from imu_square.simulate import SensorModel, simulate_run, with_effects
@@ -396,3 +405,27 @@ def test_lowpass_design_is_scipys_butter_and_a_copy(cutoff, order, fs):
     first = filter_module.design_lowpass(cutoff, order, fs)
     first[:] = 0.0  # a caller's change does not reach the next caller
     np.testing.assert_array_equal(filter_module.design_lowpass(cutoff, order, fs), reference)
+
+
+@pytest.mark.parametrize("name", ["servo", "short_gaps"])
+def test_cycle_traces_from_contiguous_copies_are_bit_for_bit(name, monkeypatch):
+    seen = []
+    original = align.cycle_traces
+
+    def spy(*args, **kwargs):
+        seen.append((args, kwargs))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(squareness, "cycle_traces", spy)
+    analyze(_case(name), OPTIONS)
+    args, kwargs = seen[0]
+    fast = original(*args, **kwargs)
+    with monkeypatch.context() as m:  # np.interp fed the strided, reversed views, as before
+        m.setattr(align.np, "ascontiguousarray", lambda v: v)
+        ref = original(*args, **kwargs)
+    assert fast.ccw.n > 0 and fast.cw.n > 0
+    for a, b in ((fast.ccw, ref.ccw), (fast.cw, ref.cw)):
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.y, b.y)
+        np.testing.assert_array_equal(a.valid, b.valid)
+    assert fast.dropped == ref.dropped

@@ -542,6 +542,7 @@ class _Scan:
         self.events = []
         self.metadata = {}
         self.attachments = {}
+        self.zstd = zstandard.ZstdDecompressor()  # one context for every chunk
 
     def wanted(self, channel_id):
         """Whether messages of ``channel_id`` are read back (samples and events)."""
@@ -610,9 +611,7 @@ class _Scan:
         """
         chunk = _read_record(Chunk, body)
         if chunk.compression == "zstd":
-            data = zstandard.ZstdDecompressor().decompress(
-                chunk.data, max_output_size=chunk.uncompressed_size
-            )
+            data = self.zstd.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
         elif chunk.compression == "":
             data = chunk.data
         else:
