@@ -856,12 +856,12 @@ def _build_recording(scan):
         if not has_temp.all():
             raise RecordingError(f"{path}: only some batches carry temperatures")
         temperature = cat([p.temperature_c for p in parts]).astype(np.float64)
-    offsets_parts = [
-        np.zeros(p.accel.shape[0], np.int64) if p.t_offset_ns is None else p.t_offset_ns
-        for p in parts
-    ]
-    if all(p.t_offset_ns is None for p in parts):
-        offsets_parts = None
+    offsets_parts = None  # regular batches throughout: no zeros made to be thrown away
+    if any(p.t_offset_ns is not None for p in parts):
+        offsets_parts = [
+            np.zeros(p.accel.shape[0], np.int64) if p.t_offset_ns is None else p.t_offset_ns
+            for p in parts
+        ]
     scan.accel_parts = []
     del parts
 

@@ -128,9 +128,12 @@ def _rho(norm, z):
     return norm.rho(z)
 
 
-def _weights(norm, z):
+def _weights(norm, z, overwrite=False):
+    # overwrite: z is a temporary of the caller's, reused for the weights. A fresh
+    # array costs more than the arithmetic here (page faults of a new allocation).
     if type(norm) is norms.TukeyBiweight:  # (1 - u)^2 where u <= 1, else 0; one array, in place
-        u = np.square(z / norm.c)
+        u = np.divide(z, norm.c, out=z if overwrite else None)
+        np.square(u, out=u)
         np.subtract(1.0, u, out=u)
         np.fmax(u, 0.0, out=u)  # fmax: a NaN z weighs 0, as in np.where(u <= 1, ...)
         return np.square(u, out=u)
@@ -274,7 +277,7 @@ def fit_irls(
                 break
         if idx.size == active.size:
             idx = slice(None)  # all rows: views, no copies
-        w_i = _weights(norm, scaled(resid[idx], idx) / scale[idx, None])
+        w_i = _weights(norm, scaled(resid[idx], idx) / scale[idx, None], overwrite=True)
         wp_i = w_i if present is None else w_i * prior[idx]
         p_i = _solve_weighted(exog, outer, endog[idx], wp_i)
         r_i = endog[idx] - p_i @ exog.T
