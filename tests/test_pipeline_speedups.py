@@ -315,7 +315,9 @@ def reference_paths(monkeypatch):
 
     def use():
         monkeypatch.setattr(segment, "_rotation", _rotation_reference)
-        monkeypatch.setattr(segment, "_magnitude", lambda r: np.hypot(r[:, 0], r[:, 1]))
+        monkeypatch.setattr(
+            segment, "_magnitude", lambda r, out=None: np.hypot(r[:, 0], r[:, 1], out=out)
+        )
         monkeypatch.setattr(noise, "_periodogram_sum", _periodogram_sum_reference)
         monkeypatch.setattr(noise, "model_residual", _model_residual_reference)
         monkeypatch.setattr(filter_module, "lowpass", _lowpass_reference)
@@ -431,3 +433,51 @@ def test_cycle_traces_from_contiguous_copies_are_bit_for_bit(name, monkeypatch):
         np.testing.assert_array_equal(a.y, b.y)
         np.testing.assert_array_equal(a.valid, b.valid)
     assert fast.dropped == ref.dropped
+
+
+@given(arrays(np.float64, st.tuples(st.integers(1, 40), st.just(2)), elements=st.floats(-1e3, 1e3)))
+def test_magnitude_into_a_reused_array_is_bit_for_bit(rel):
+    x, y = rel[:, 0], rel[:, 1]
+    expected = np.sqrt(x * x + y * y)
+    np.testing.assert_array_equal(segment._magnitude(rel), expected)
+    reused = np.full(rel.shape[0], 7.0)
+    assert segment._magnitude(rel, out=reused) is reused
+    np.testing.assert_array_equal(reused, expected)
+    np.testing.assert_allclose(expected, np.hypot(x, y), rtol=4e-16, atol=1e-150)  # x*x underflows
+
+
+def _rotation_with_temporaries(t, rel, period):
+    """segment._rotation as in the first round (each step a fresh array), for bit-for-bit checks."""
+
+    def wrap(a):
+        return a - (2 * np.pi) * np.rint(a / (2 * np.pi))
+
+    angle = np.arctan2(rel[:, 1], rel[:, 0])
+    lag = max(1, round(period / 8 / order_stats.median(np.diff(t))))
+    if angle.size <= lag + 2:
+        return 0.0, 1.0
+    omega0 = order_stats.median(wrap(angle[lag:] - angle[:-lag]) / (t[lag:] - t[:-lag]))
+    u = t - 0.5 * (t[0] + t[-1])
+    resid = wrap(angle - omega0 * u)
+    dev = wrap(resid - order_stats.median(resid))
+    good = np.abs(dev) < segment._MAX_PHASE_DEVIATION
+    if np.count_nonzero(good) < 3:
+        return omega0, 1.0
+    slope = segment._phase_slope(u[good], dev[good], omega0)
+    return omega0 + slope, 1.0 - float(np.count_nonzero(good)) / good.size
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    omega=st.floats(-6.0, 6.0).filter(lambda w: abs(w) > 0.05),
+    periods=st.floats(0.2, 12.0),
+    noise=st.floats(0.0, 0.5),
+    seed=st.integers(0, 2**16),
+)
+def test_rotation_in_place_is_bit_for_bit(omega, periods, noise, seed):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, periods * 2 * np.pi / abs(omega), 1e-3)
+    phi = omega * t + 0.3
+    rel = np.column_stack([np.cos(phi), np.sin(phi)]) + noise * rng.standard_normal((t.size, 2))
+    period = 2 * np.pi / abs(omega)
+    assert segment._rotation(t, rel, period) == _rotation_with_temporaries(t, rel, period)
