@@ -142,20 +142,12 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
             c, s = np.cos(phi), np.sin(phi)
             # phi minus whole turns by floor, not np.mod (ten times slower): within an ulp
             # of [0, turn), which the table's wrapped ends cover.
-            wrapped = np.floor(phi / turn)
-            wrapped *= turn
-            rem = np.interp(np.subtract(phi, wrapped, out=wrapped), table_phi, table_rem)
+            rem = np.interp(phi - turn * np.floor(phi / turn), table_phi, table_rem)
             res = np.empty((hi - lo, 2))
-            # p0 + (p1 c + p2 s) / gain + remainder, in two reused arrays (fresh ones
-            # cost page faults), the same operations in the same order.
-            model, term = np.empty(hi - lo), np.empty(hi - lo)
             for axis, (p, r) in enumerate(zip(params, (rem.real, rem.imag), strict=True)):
-                np.multiply(p[1], c, out=model)
-                model += np.multiply(p[2], s, out=term)
-                model /= mean_fit.gain
-                model += p[0]
+                model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
                 model += r
-                np.subtract(raw[lo:hi, axis], model, out=res[:, axis])
+                res[:, axis] = raw[lo:hi, axis] - model
             ok = valid[lo:hi]
             edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
             out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
