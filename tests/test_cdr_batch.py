@@ -91,6 +91,30 @@ def test_decode_many_layouts_matches_mcap_ros2_decoder():
     assert got.accel.shape == (start, 3)
 
 
+def test_decode_runs_of_one_layout_among_others_matches_mcap_ros2_decoder():
+    # Consecutive messages of one layout are copied as one slice, scattered ones sample by
+    # sample: both, in one call, against the reference decoder.
+    layouts = [(100, False, False)] * 5 + [(7, True, True)] * 2 + [(100, False, False)] * 4
+    layouts += [(50, False, True), (100, False, False), (50, False, True)]
+    messages, truth = [], []
+    for i, (n, temp, offs) in enumerate(layouts):
+        accel, temperature, offsets = _batch(n, temp, offs, 300 + i)
+        messages.append(encode_accel_batch(i, 1000, 10 * i, accel, temperature, offsets))
+        truth.append(accel)
+    got = decode_accel_batches(messages)
+    start = 0
+    for k, (msg, accel) in enumerate(zip(messages, truth, strict=True)):
+        ref = REF_DECODE(msg)
+        n = accel.shape[0]
+        assert got.counts[k] == n and got.seq0[k] == ref.seq0
+        expected = np.column_stack([ref.x, ref.y, ref.z]).reshape(n, 3)
+        assert_array_equal(got.accel[start : start + n], expected)
+        if ref.t_offset_ns:
+            assert_array_equal(got.t_offset_ns[start : start + n], ref.t_offset_ns)
+        start += n
+    assert got.accel.shape == (start, 3)
+
+
 def test_decode_regular_batches_has_no_offsets_or_temperature():
     got = decode_accel_batches([encode_accel_batch(0, 1, 0, np.zeros((5, 3)))] * 3)
     assert got.t_offset_ns is None and got.temperature_c is None

@@ -4,6 +4,7 @@ import functools
 import io
 import json
 import shutil
+import struct
 import warnings
 
 import numpy as np
@@ -444,3 +445,45 @@ def test_summarize(tmp_path):
     assert s["program"]["radius_mm"] == pytest.approx(50.0)
     assert s["sensor"]["resolution_m_s2"] is None  # NaN is not JSON
     json.dumps(s, allow_nan=False)
+
+
+def _with_bad_index(data, chunk_no, offset_of):
+    """``data`` with the first offset of every message index after chunk ``chunk_no`` replaced.
+
+    Returns the bytes and the offsets put in.
+    """
+    broken, pos, chunks, put = bytearray(data), 8, 0, []
+    while pos + 9 <= len(data):
+        opcode, length = struct.unpack_from("<BQ", data, pos)
+        body = pos + 9
+        if opcode == 0x06:
+            chunks += 1
+        elif opcode == 0x07 and chunks == chunk_no:
+            entry = body + 6 + 8  # channel id, entries' length, first entry's timestamp
+            new = offset_of(struct.unpack_from("<Q", data, entry)[0])
+            struct.pack_into("<Q", broken, entry, new)
+            put.append(new)
+        elif opcode == 0x02:  # the footer
+            break
+        pos = body + length
+    return bytes(broken), put
+
+
+@pytest.mark.parametrize("bad", ["inside_a_record", "beyond_the_chunk"])
+def test_message_index_pointing_astray_stops_reading_at_its_chunk(tmp_path, chunked_file, bad):
+    rec, data = chunked_file
+    shift = (lambda o: o + 1) if bad == "inside_a_record" else (lambda o: o + 2**40)
+    broken, offsets = _with_bad_index(data, 3, shift)
+    assert offsets
+    path = tmp_path / "astray.mcap"
+    path.write_bytes(broken)
+    with pytest.warns(ImuSquareWarning, match="damaged at byte") as w:
+        back = read_mcap(path)
+    message = str(w[0].message)
+    if bad == "inside_a_record":
+        assert any(f"(message index points to a non-message at {o})" in message for o in offsets)
+    else:
+        assert any(f"unpacking 11 bytes at offset {o} " in message for o in offsets)
+    assert "\n" not in message
+    assert 0 < back.n_samples < rec.n_samples
+    assert_array_equal(back.accel, rec.accel[: back.n_samples])

@@ -19,8 +19,17 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy import signal
 
+from imu_square.pipeline import (
+    align,
+    fit,
+    noise,
+    order_stats,
+    per_cycle,
+    quality,
+    segment,
+    squareness,
+)
 from imu_square.pipeline import filter as filter_module
-from imu_square.pipeline import fit, noise, order_stats, segment
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import TestProgram
 from imu_square.simulate import SensorModel, simulate_run, with_effects
@@ -132,6 +141,81 @@ def test_phase_fit_matches_lstsq(omega, periods, ellipse, noise, gap, seed):
     assert fast == pytest.approx(ref, rel=1e-9, abs=1e-12)
 
 
+def _phase_slope_basis_reference(u, dev, omega):
+    """segment._phase_slope's normal equations with the basis stacked from temporaries."""
+    half = max(abs(u[0]), abs(u[-1]), np.finfo(float).tiny)
+    c, s = np.cos(omega * u), np.sin(omega * u)
+    basis = np.stack([np.ones_like(u), u / half, c, s, c * c - s * s, 2 * c * s])
+    return float(np.linalg.solve(basis @ basis.T, basis @ dev)[1] / half)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    omega=st.floats(-6.0, 6.0).filter(lambda w: abs(w) > 0.05),
+    periods=st.floats(1.0, 12.0),
+    seed=st.integers(0, 2**16),
+)
+def test_phase_slope_basis_in_place_is_bit_for_bit(omega, periods, seed):
+    rng = np.random.default_rng(seed)
+    u = np.arange(0.0, periods * 2 * np.pi / abs(omega), 1e-3)
+    u -= 0.5 * u[-1]
+    dev = 0.01 * u + 0.02 * np.sin(2 * omega * u) + 0.1 * rng.standard_normal(u.size)
+    assert segment._phase_slope(u, dev, omega) == _phase_slope_basis_reference(u, dev, omega)
+
+
+def _tukey_weights_reference(norm, z):
+    u = np.square(z / norm.c)
+    return np.where(u <= 1.0, np.square(1.0 - u), 0.0)
+
+
+@given(
+    arrays(
+        np.float64,
+        st.integers(1, 50),
+        elements=st.floats(-20, 20) | st.sampled_from([np.nan, np.inf, -np.inf, 0.0, -0.0]),
+    ),
+    st.floats(1.0, 6.0),
+)
+def test_tukey_weights_in_place_are_bit_for_bit_and_statsmodels(z, c):
+    norm = fit.robust_norm("tukey", c)
+    fast = fit._weights(norm, z)
+    np.testing.assert_array_equal(fast, _tukey_weights_reference(norm, z))
+    scratch = z.copy()
+    np.testing.assert_array_equal(fit._weights(norm, scratch, overwrite=True), fast)
+    finite = np.isfinite(z)
+    np.testing.assert_allclose(fast[finite], norm.weights(z[finite]), rtol=1e-13, atol=1e-300)
+
+
+@pytest.mark.parametrize("complete", [True, False])
+def test_circle_fits_without_covariance_are_the_same_fits(complete):
+    rng = np.random.default_rng(11)
+    phi = np.linspace(0, 2 * np.pi, 360, endpoint=False)
+    ax = 1 + 3 * np.cos(phi - 0.01) + 0.05 * rng.standard_normal((40, phi.size))
+    ay = -3 * np.sin(phi - 0.02) + 0.05 * rng.standard_normal((40, phi.size))
+    ax[:, 7] += 2.0  # an outlier the robust norm weighs down
+    prior = None if complete else (rng.random((40, phi.size)) > 0.05).astype(float)
+    full = fit.fit_circle(phi, ax, ay, prior_weights=prior, maxiter=50, tol=1e-8)
+    lean = fit.fit_circle(phi, ax, ay, prior_weights=prior, maxiter=50, tol=1e-8, covariance=False)
+    for a, b in ((full.x, lean.x), (full.y, lean.y)):
+        np.testing.assert_array_equal(a.params, b.params)
+        np.testing.assert_array_equal(a.scale, b.scale)
+        np.testing.assert_array_equal(a.iterations, b.iterations)
+        assert np.all(np.isnan(b.cov)) and np.all(np.isnan(b.bse))
+    np.testing.assert_array_equal(full.squareness, lean.squareness)
+    np.testing.assert_array_equal(full.mean_phase, lean.mean_phase)
+    assert np.all(np.isnan(lean.u_theta_x)) and np.all(np.isfinite(full.u_theta_x))
+
+
+def test_clipped_times_with_a_valid_mask_are_those_of_the_valid_samples():
+    rng = np.random.default_rng(2)
+    t = np.arange(5000) * 1e-3
+    raw = rng.normal(0, 10, (5000, 3))
+    valid = rng.random(5000) > 0.1
+    clipped = quality.clipped_times(t, raw, 20.0, valid)
+    np.testing.assert_array_equal(clipped, quality.clipped_times(t[valid], raw[valid], 20.0))
+    assert 0 < clipped.size < np.count_nonzero(np.any(np.abs(raw) >= 0.999 * 20.0, axis=1))
+
+
 def _periodogram_sum_reference(r, window):
     """noise._periodogram_sum from scipy.signal.welch, its scaling undone."""
     n = window.size
@@ -207,13 +291,33 @@ def _model_residual_reference(filtered, segmentation, cycles, mean_fit):
     return out
 
 
+@pytest.mark.parametrize("name", ["servo", "short_gaps", "fast_circle"])
+def test_model_residual_is_the_reference_to_round_off(name, monkeypatch):
+    seen = []
+    original = noise.model_residual
+
+    def spy(*args):
+        seen.append(args)
+        return original(*args)
+
+    monkeypatch.setattr(noise, "model_residual", spy)
+    analyze(_case(name), OPTIONS)
+    fast = original(*seen[0])
+    ref = _model_residual_reference(*seen[0])
+    assert len(fast) == len(ref) and len(fast) > 0
+    for a, b in zip(fast, ref, strict=True):  # phi's whole turns off by ulps of ~1e3 rad
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
 @pytest.fixture
 def reference_paths(monkeypatch):
     """Swap every fast path for the library call it replaces."""
 
     def use():
         monkeypatch.setattr(segment, "_rotation", _rotation_reference)
-        monkeypatch.setattr(segment, "_magnitude", lambda r: np.hypot(r[:, 0], r[:, 1]))
+        monkeypatch.setattr(
+            segment, "_magnitude", lambda r, out=None: np.hypot(r[:, 0], r[:, 1], out=out)
+        )
         monkeypatch.setattr(noise, "_periodogram_sum", _periodogram_sum_reference)
         monkeypatch.setattr(noise, "model_residual", _model_residual_reference)
         monkeypatch.setattr(filter_module, "lowpass", _lowpass_reference)
@@ -224,6 +328,10 @@ def reference_paths(monkeypatch):
         monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
         monkeypatch.setattr(fit, "row_medians", lambda a: np.median(a, axis=-1))
         monkeypatch.setattr(fit, "_psi_and_deriv", lambda m, z: (m.psi(z), m.psi_deriv(z)))
+        monkeypatch.setattr(fit, "_weights", lambda m, z, overwrite=False: m.weights(z))
+        monkeypatch.setattr(
+            per_cycle, "fit_circle", lambda *a, covariance, **k: fit.fit_circle(*a, **k)
+        )
 
     return use
 
@@ -291,3 +399,85 @@ def test_analysis_equals_the_reference_paths(name, reference_paths):
             assert fast.quality[key] == value, key
     np.testing.assert_allclose(fast.per_cycle["t_ccw_s"], ref.per_cycle["t_ccw_s"], atol=1e-9)
     np.testing.assert_allclose(fast.per_cycle["t_cw_s"], ref.per_cycle["t_cw_s"], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("cutoff", "order", "fs"), [(4.0, 1, 1000.0), (20.0, 4, 1000.0), (3, 2, 800)]
+)
+def test_lowpass_design_is_scipys_butter_and_a_copy(cutoff, order, fs):
+    reference = signal.butter(order, cutoff, output="sos", fs=fs)
+    first = filter_module.design_lowpass(cutoff, order, fs)
+    first[:] = 0.0  # a caller's change does not reach the next caller
+    np.testing.assert_array_equal(filter_module.design_lowpass(cutoff, order, fs), reference)
+
+
+@pytest.mark.parametrize("name", ["servo", "short_gaps"])
+def test_cycle_traces_from_contiguous_copies_are_bit_for_bit(name, monkeypatch):
+    seen = []
+    original = align.cycle_traces
+
+    def spy(*args, **kwargs):
+        seen.append((args, kwargs))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(squareness, "cycle_traces", spy)
+    analyze(_case(name), OPTIONS)
+    args, kwargs = seen[0]
+    fast = original(*args, **kwargs)
+    with monkeypatch.context() as m:  # np.interp fed the strided, reversed views, as before
+        m.setattr(align.np, "ascontiguousarray", lambda v: v)
+        ref = original(*args, **kwargs)
+    assert fast.ccw.n > 0 and fast.cw.n > 0
+    for a, b in ((fast.ccw, ref.ccw), (fast.cw, ref.cw)):
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.y, b.y)
+        np.testing.assert_array_equal(a.valid, b.valid)
+    assert fast.dropped == ref.dropped
+
+
+@given(arrays(np.float64, st.tuples(st.integers(1, 40), st.just(2)), elements=st.floats(-1e3, 1e3)))
+def test_magnitude_into_a_reused_array_is_bit_for_bit(rel):
+    x, y = rel[:, 0], rel[:, 1]
+    expected = np.sqrt(x * x + y * y)
+    np.testing.assert_array_equal(segment._magnitude(rel), expected)
+    reused = np.full(rel.shape[0], 7.0)
+    assert segment._magnitude(rel, out=reused) is reused
+    np.testing.assert_array_equal(reused, expected)
+    np.testing.assert_allclose(expected, np.hypot(x, y), rtol=4e-16, atol=1e-150)  # x*x underflows
+
+
+def _rotation_with_temporaries(t, rel, period):
+    """segment._rotation as in the first round (each step a fresh array), for bit-for-bit checks."""
+
+    def wrap(a):
+        return a - (2 * np.pi) * np.rint(a / (2 * np.pi))
+
+    angle = np.arctan2(rel[:, 1], rel[:, 0])
+    lag = max(1, round(period / 8 / order_stats.median(np.diff(t))))
+    if angle.size <= lag + 2:
+        return 0.0, 1.0
+    omega0 = order_stats.median(wrap(angle[lag:] - angle[:-lag]) / (t[lag:] - t[:-lag]))
+    u = t - 0.5 * (t[0] + t[-1])
+    resid = wrap(angle - omega0 * u)
+    dev = wrap(resid - order_stats.median(resid))
+    good = np.abs(dev) < segment._MAX_PHASE_DEVIATION
+    if np.count_nonzero(good) < 3:
+        return omega0, 1.0
+    slope = segment._phase_slope(u[good], dev[good], omega0)
+    return omega0 + slope, 1.0 - float(np.count_nonzero(good)) / good.size
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    omega=st.floats(-6.0, 6.0).filter(lambda w: abs(w) > 0.05),
+    periods=st.floats(0.2, 12.0),
+    noise=st.floats(0.0, 0.5),
+    seed=st.integers(0, 2**16),
+)
+def test_rotation_in_place_is_bit_for_bit(omega, periods, noise, seed):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, periods * 2 * np.pi / abs(omega), 1e-3)
+    phi = omega * t + 0.3
+    rel = np.column_stack([np.cos(phi), np.sin(phi)]) + noise * rng.standard_normal((t.size, 2))
+    period = 2 * np.pi / abs(omega)
+    assert segment._rotation(t, rel, period) == _rotation_with_temporaries(t, rel, period)

@@ -174,6 +174,13 @@ def _column(rows, start, n, dtype):
     return rows[:, start : start + 4 * n].view(dtype)
 
 
+def _subset(idx, rows, mask):
+    """``idx[mask], rows[mask]``, without copying when ``mask`` is all True."""
+    if mask.all():
+        return idx, rows
+    return idx[mask], rows[mask]
+
+
 def decode_accel_batches(messages, source="<messages>"):
     """Decode AccelBatch messages, vectorised over messages of equal layout.
 
@@ -222,8 +229,7 @@ def decode_accel_batches(messages, source="<messages>"):
         t0_ns[idx] = rows[:, 12:20].view("<i8")[:, 0]
         n_all = rows[:, 20:24].view("<u4")[:, 0].astype(np.int64)
         for n in np.unique(n_all):
-            sub = idx[n_all == n]
-            sub_rows = rows[n_all == n]
+            sub, sub_rows = _subset(idx, rows, n_all == n)
             if _FIXED_BYTES + 12 * n > length:
                 raise RecordingError(f"{source}: AccelBatch message claims {n} samples")
             ny = _column(sub_rows, 24 + 4 * n, 1, "<u4")[:, 0]
@@ -233,14 +239,13 @@ def decode_accel_batches(messages, source="<messages>"):
                 raise RecordingError(f"{source}: AccelBatch message has arrays of unequal length")
             for nt in np.unique(nt_all):
                 no = (length - _FIXED_BYTES - 12 * n - 4 * nt) // 4
-                g_rows = sub_rows[nt_all == nt]
+                g_idx, g_rows = _subset(sub, sub_rows, nt_all == nt)
                 no_field = _column(g_rows, 36 + 12 * n + 4 * nt, 1, "<u4")[:, 0]
                 if no not in (0, n) or np.any(no_field != no):
                     raise RecordingError(
                         f"{source}: AccelBatch message length {length} does not match its "
                         f"array lengths"
                     )
-                g_idx = sub[nt_all == nt]
                 counts[g_idx] = n
                 has_temp[g_idx] = nt > 0
                 groups.append((g_idx, g_rows, int(n), int(nt), int(no)))
@@ -253,7 +258,10 @@ def decode_accel_batches(messages, source="<messages>"):
     for g_idx, rows, n, nt, no in groups:
         if n == 0:
             continue
-        pos = (starts[g_idx][:, None] + np.arange(n)).ravel()
+        if g_idx[-1] - g_idx[0] + 1 == g_idx.size:  # consecutive messages: one slice, no scatter
+            pos = slice(starts[g_idx[0]], starts[g_idx[-1] + 1])
+        else:
+            pos = (starts[g_idx][:, None] + np.arange(n)).ravel()
         for axis in range(3):
             accel[pos, axis] = _column(rows, 24 + axis * (4 + 4 * n), n, "<f4").ravel()
         if nt:

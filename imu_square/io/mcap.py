@@ -542,22 +542,23 @@ class _Scan:
         self.events = []
         self.metadata = {}
         self.attachments = {}
+        self.zstd = zstandard.ZstdDecompressor()  # one context for every chunk
 
     def wanted(self, channel_id):
         """Whether messages of ``channel_id`` are read back (samples and events)."""
         channel = self.channels.get(channel_id)
         return channel is not None and channel.topic in (ACCEL_TOPIC, EVENTS_TOPIC)
 
-    def add_messages(self, messages, other_counts):
-        """Keep the messages (channel_id, data) of one complete record."""
+    def add_messages(self, runs, other_counts):
+        """Keep the messages of one complete record: ``runs`` of (channel_id, [data, ...])."""
         for channel_id, n in other_counts.items():
             channel = self.channels.get(channel_id)
             if channel is None:
                 raise RecordingError(f"{self.path}: message on unknown channel {channel_id}")
             self.counts[channel.topic] += n
-        for channel_id, data in messages:
+        for channel_id, payloads in runs:
             channel = self.channels[channel_id]
-            self.counts[channel.topic] += 1
+            self.counts[channel.topic] += len(payloads)
             if channel.topic == ACCEL_TOPIC:
                 schema = self.schemas.get(channel.schema_id)
                 if schema is None or schema.name != ACCEL_BATCH_SCHEMA_NAME:
@@ -565,10 +566,10 @@ class _Scan:
                         f"{self.path}: {ACCEL_TOPIC} must use schema "
                         f"{ACCEL_BATCH_SCHEMA_NAME!r}, got {getattr(schema, 'name', None)!r}"
                     )
-                self.accel_messages.append(data)
-                self.accel_bytes += len(data)
+                self.accel_messages += payloads
+                self.accel_bytes += sum(map(len, payloads))
             else:
-                self.events.append(_parse_event(data, self.path))
+                self.events += [_parse_event(data, self.path) for data in payloads]
         if self.accel_bytes > _DECODE_BYTES:
             self.decode_pending()
 
@@ -584,7 +585,7 @@ class _Scan:
         if opcode == Opcode.MESSAGE:
             channel_id = struct.unpack_from("<H", body)[0]
             if self.wanted(channel_id):
-                self.add_messages([(channel_id, body[22:])], {})
+                self.add_messages([(channel_id, [body[22:]])], {})
             else:
                 self.add_messages([], {channel_id: 1})
         elif opcode == Opcode.SCHEMA:
@@ -610,9 +611,7 @@ class _Scan:
         """
         chunk = _read_record(Chunk, body)
         if chunk.compression == "zstd":
-            data = zstandard.ZstdDecompressor().decompress(
-                chunk.data, max_output_size=chunk.uncompressed_size
-            )
+            data = self.zstd.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
         elif chunk.compression == "":
             data = chunk.data
         else:
@@ -624,17 +623,13 @@ class _Scan:
         if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
             raise McapError("chunk CRC mismatch")
         unpack = struct.unpack_from
-        messages, other = [], Counter()
+        runs, other = [], Counter()  # runs: (channel_id, [data, ...]) in reading order
         if indexes is not None and all(ch in self.channels for ch in indexes):
             for channel_id, offsets in indexes.items():
                 if not self.wanted(channel_id):
                     other[channel_id] += offsets.size
                     continue
-                for offset in np.sort(offsets).tolist():
-                    opcode, length, ch = unpack("<BQH", data, offset)
-                    if opcode != Opcode.MESSAGE or ch != channel_id:
-                        raise McapError(f"message index points to a non-message at {offset}")
-                    messages.append((ch, data[offset + 31 : offset + 9 + length]))
+                runs.append((channel_id, _indexed_messages(data, np.sort(offsets), channel_id)))
         else:
             pos, end = 0, len(data)
             while pos < end:
@@ -646,12 +641,49 @@ class _Scan:
                 if opcode == Opcode.MESSAGE:
                     channel_id = unpack("<H", data, start)[0]
                     if self.wanted(channel_id):
-                        messages.append((channel_id, data[start + 22 : pos]))
+                        if not runs or runs[-1][0] != channel_id:
+                            runs.append((channel_id, []))
+                        runs[-1][1].append(data[start + 22 : pos])
                     else:
                         other[channel_id] += 1
                 elif opcode in (Opcode.SCHEMA, Opcode.CHANNEL):
                     self.add_record(opcode, data[start:pos])
-        self.add_messages(messages, other)
+        self.add_messages(runs, other)
+
+
+_MESSAGE_HEAD = 11  # opcode (1), record length (8), channel id (2)
+
+
+def _indexed_messages(data, offsets, channel_id):
+    """Payloads of the messages of ``channel_id`` at ``offsets`` (sorted) in a chunk's ``data``.
+
+    The record heads are checked all at once; if any lies outside the chunk or
+    is not a message of that channel, they are read one by one, which raises
+    the error that names the first bad one.
+    """
+    size = len(data)
+    if offsets.size == 0:
+        return []
+    if int(offsets[-1]) + _MESSAGE_HEAD <= size:
+        heads = np.frombuffer(data, np.uint8)[
+            offsets[:, None].astype(np.intp) + np.arange(_MESSAGE_HEAD)
+        ]
+        lengths = heads[:, 1:9].copy().view("<u8")[:, 0]
+        channels = heads[:, 9:11].copy().view("<u2")[:, 0]
+        if (
+            np.all(heads[:, 0] == Opcode.MESSAGE)
+            and np.all(channels == channel_id)
+            and np.all(lengths <= size)  # the ends below then hold in uint64
+        ):
+            ends = (offsets + 9 + lengths).tolist()
+            return [data[a + 31 : b] for a, b in zip(offsets.tolist(), ends, strict=True)]
+    payloads = []
+    for offset in offsets.tolist():
+        opcode, length, ch = struct.unpack_from("<BQH", data, offset)
+        if opcode != Opcode.MESSAGE or ch != channel_id:
+            raise McapError(f"message index points to a non-message at {offset}")
+        payloads.append(data[offset + 31 : offset + 9 + length])
+    return payloads
 
 
 def _parse_event(data, path):
@@ -824,12 +856,12 @@ def _build_recording(scan):
         if not has_temp.all():
             raise RecordingError(f"{path}: only some batches carry temperatures")
         temperature = cat([p.temperature_c for p in parts]).astype(np.float64)
-    offsets_parts = [
-        np.zeros(p.accel.shape[0], np.int64) if p.t_offset_ns is None else p.t_offset_ns
-        for p in parts
-    ]
-    if all(p.t_offset_ns is None for p in parts):
-        offsets_parts = None
+    offsets_parts = None  # regular batches throughout: no zeros made to be thrown away
+    if any(p.t_offset_ns is not None for p in parts):
+        offsets_parts = [
+            np.zeros(p.accel.shape[0], np.int64) if p.t_offset_ns is None else p.t_offset_ns
+            for p in parts
+        ]
     scan.accel_parts = []
     del parts
 

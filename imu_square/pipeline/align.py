@@ -195,9 +195,11 @@ def cycle_traces(
         i0 = max(int(np.searchsorted(t_s, ta)) - 2, 0)
         i1 = min(int(np.searchsorted(t_s, tb)) + 2, t_s.size)
         phi = seg.phi(block, t_s[i0:i1])
-        a = accel_xy[i0:i1]
+        ax, ay = accel_xy[i0:i1, 0], accel_xy[i0:i1, 1]
         if block.sign < 0:
-            phi, a = phi[::-1], a[::-1]
+            phi, ax, ay = phi[::-1], ax[::-1], ay[::-1]
+        # np.interp copies strided or reversed arrays on every call: copy them once here.
+        phi, ax, ay = (np.ascontiguousarray(v) for v in (phi, ax, ay))
         for j in range(n_cyc):  # j counts cycles in increasing phi
             k = j if block.sign > 0 else n_cyc - 1 - j  # k counts cycles in time
             c0, c1 = sorted(
@@ -225,8 +227,8 @@ def cycle_traces(
             ok = ~_inside(seg.time_at(block, pts), missing)
             out[d].append(
                 (
-                    np.where(ok, np.interp(pts, phi, a[:, 0]), np.nan),
-                    np.where(ok, np.interp(pts, phi, a[:, 1]), np.nan),
+                    np.where(ok, np.interp(pts, phi, ax), np.nan),
+                    np.where(ok, np.interp(pts, phi, ay), np.nan),
                     ok,
                     block.plan.index,
                     k + n_cyc * nth,

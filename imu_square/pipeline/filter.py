@@ -38,6 +38,7 @@ References
    (2019).
 """
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -87,7 +88,14 @@ def design_lowpass(cutoff_hz, order, sample_rate_hz):
         )
     if int(order) != order or not 1 <= order <= 8:
         raise AnalysisError(f"filter order must be a whole number in [1, 8], got {order!r}")
-    return signal.butter(int(order), cutoff_hz, output="sos", fs=sample_rate_hz)
+    return _butter_sos(int(order), float(cutoff_hz), float(sample_rate_hz)).copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _butter_sos(order, cutoff_hz, sample_rate_hz):
+    # scipy's design takes a millisecond, as long as filtering 100k samples, and
+    # every analysis asks for the same few filters (twice each).
+    return signal.butter(order, cutoff_hz, output="sos", fs=sample_rate_hz)
 
 
 def lowpass(data, cutoff_hz, order, sample_rate_hz, breaks=()):
@@ -117,15 +125,17 @@ def lowpass(data, cutoff_hz, order, sample_rate_hz, breaks=()):
     data = np.asarray(data, dtype=np.float64)
     # One contiguous channel at a time: on (n, k) along axis 0 sosfiltfilt copies
     # and pads strided data several times, at twice the cost; the numbers are the same.
-    channels = np.ascontiguousarray(np.moveaxis(data, 0, -1)).reshape(-1, data.shape[0])
-    out = channels.copy()
+    # Each channel is copied out once and its stretches written straight into the output.
+    columns = data.reshape(data.shape[0], -1)
+    out = np.empty(columns.shape)
     edges = [0, *sorted(int(b) for b in breaks), data.shape[0]]
     min_len = 3 * (2 * sos.shape[0] + 1)
-    for a, b in itertools.pairwise(edges):
-        if b - a > min_len:
-            for ch, filtered in zip(channels, out, strict=True):
-                filtered[a:b] = signal.sosfiltfilt(sos, ch[a:b])
-    return np.ascontiguousarray(np.moveaxis(out.reshape((*data.shape[1:], -1)), -1, 0))
+    for k in range(columns.shape[1]):
+        channel = np.ascontiguousarray(columns[:, k])
+        for a, b in itertools.pairwise(edges):
+            long = b - a > min_len
+            out[a:b, k] = signal.sosfiltfilt(sos, channel[a:b]) if long else channel[a:b]
+    return out.reshape(data.shape)
 
 
 def circle_cutoff_hz(circle_frequency_hz, sample_rate_hz):

@@ -128,10 +128,15 @@ def _rho(norm, z):
     return norm.rho(z)
 
 
-def _weights(norm, z):
-    if type(norm) is norms.TukeyBiweight:
-        u = np.square(z / norm.c)
-        return np.where(u <= 1.0, np.square(1.0 - u), 0.0)
+def _weights(norm, z, overwrite=False):
+    # overwrite: z is a temporary of the caller's, reused for the weights. A fresh
+    # array costs more than the arithmetic here (page faults of a new allocation).
+    if type(norm) is norms.TukeyBiweight:  # (1 - u)^2 where u <= 1, else 0; one array, in place
+        u = np.divide(z, norm.c, out=z if overwrite else None)
+        np.square(u, out=u)
+        np.subtract(1.0, u, out=u)
+        np.fmax(u, 0.0, out=u)  # fmax: a NaN z weighs 0, as in np.where(u <= 1, ...)
+        return np.square(u, out=u)
     return norm.weights(z)
 
 
@@ -164,6 +169,7 @@ def fit_irls(
     start_params=None,
     freeze_scale_after=None,
     prior_weights=None,
+    covariance=True,
 ):
     """Robust linear regression of every row of ``endog`` on ``exog`` by IRLS.
 
@@ -202,6 +208,10 @@ def fit_irls(
         Inverse relative variance of each observation (e.g. how many cycles a
         point of a mean trace averages); 0 marks a missing observation, whose
         ``endog`` may be NaN. All ones if None.
+    covariance : bool
+        Compute ``cov`` and ``bse``; if False they are NaN (the fits are the
+        same): for many fits whose spread, not covariance, is wanted, it saves
+        about a fifth of the cost (the per-cycle and bootstrap fits).
 
     Returns
     -------
@@ -267,7 +277,7 @@ def fit_irls(
                 break
         if idx.size == active.size:
             idx = slice(None)  # all rows: views, no copies
-        w_i = _weights(norm, scaled(resid[idx], idx) / scale[idx, None])
+        w_i = _weights(norm, scaled(resid[idx], idx) / scale[idx, None], overwrite=True)
         wp_i = w_i if present is None else w_i * prior[idx]
         p_i = _solve_weighted(exog, outer, endog[idx], wp_i)
         r_i = endog[idx] - p_i @ exog.T
@@ -295,7 +305,10 @@ def fit_irls(
             ImuSquareWarning,
             stacklevel=2,
         )
-    cov = _cov_h1(norm, exog, scaled(resid), scale, present, prior, outer)
+    if covariance:
+        cov = _cov_h1(norm, exog, scaled(resid), scale, present, prior, outer)
+    else:
+        cov = np.full((endog.shape[0], p, p), np.nan)
     if present is not None:
         resid = np.where(present, resid, np.nan)
         weights = np.where(present, weights, 0.0)
@@ -416,7 +429,14 @@ def _phase(a, b, cov, da, db):
 
 
 def fit_circle(
-    phi, accel_x, accel_y, norm=None, start_params=None, prior_weights=None, **irls_options
+    phi,
+    accel_x,
+    accel_y,
+    norm=None,
+    start_params=None,
+    prior_weights=None,
+    covariance=True,
+    **irls_options,
 ):
     """Stage 1: robust sine fit of both axes in the position-angle domain.
 
@@ -434,6 +454,9 @@ def fit_circle(
     prior_weights : ndarray, shape (n_obs,) or (n_fits, n_obs), optional
         Inverse relative variance of each point, 0 where it holds no data
         (:func:`fit_irls`); the same for both axes.
+    covariance : bool
+        Compute the fits' covariance; if False it and ``u_theta_x``,
+        ``u_theta_y`` are NaN (:func:`fit_irls`).
     **irls_options
         Passed to :func:`fit_irls`.
 
@@ -443,9 +466,9 @@ def fit_circle(
     """
     exog = sine_design(phi)
     sx, sy = (None, None) if start_params is None else start_params
-    pw = prior_weights
-    fx = fit_irls(exog, accel_x, norm, start_params=sx, prior_weights=pw, **irls_options)
-    fy = fit_irls(exog, accel_y, norm, start_params=sy, prior_weights=pw, **irls_options)
+    kw = dict(prior_weights=prior_weights, covariance=covariance, **irls_options)
+    fx = fit_irls(exog, accel_x, norm, start_params=sx, **kw)
+    fy = fit_irls(exog, accel_y, norm, start_params=sy, **kw)
     # a_x = c - A cos(phi - th) = c - A cos(th) cos(phi) - A sin(th) sin(phi)
     theta_x, u_x = _phase(-fx.params[:, 2], -fx.params[:, 1], fx.cov, 2, 1)
     # a_y = c - A sin(phi - th) = c + A sin(th) cos(phi) - A cos(th) sin(phi)

@@ -106,6 +106,7 @@ def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0
         norm,
         start_params=(main.x.params[which], main.y.params[which]),
         prior_weights=None if complete else np.concatenate(rows_w),
+        covariance=False,  # only the phases are used: their spread is the uncertainty
         **irls,
     )
     n1, n2 = ccw.n, cw.n

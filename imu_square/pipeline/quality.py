@@ -88,7 +88,7 @@ def check_period(disagreement, measured_s, program):
         )
 
 
-def clipped_times(t_s, accel, range_m_s2):
+def clipped_times(t_s, accel, range_m_s2, valid=None):
     """Times of samples at or beyond the sensor's full scale.
 
     Parameters
@@ -99,6 +99,8 @@ def clipped_times(t_s, accel, range_m_s2):
         Raw acceleration. [m/s^2]
     range_m_s2 : float
         Full-scale range; NaN when unknown (then nothing is flagged). [m/s^2]
+    valid : ndarray of bool, shape (n_samples,), optional
+        Samples that are data (not bridged); all if None.
 
     Returns
     -------
@@ -108,7 +110,7 @@ def clipped_times(t_s, accel, range_m_s2):
     if not np.isfinite(range_m_s2):
         return np.empty(0)
     hit = np.any(np.abs(accel) >= 0.999 * range_m_s2, axis=1)
-    return t_s[hit]
+    return t_s[hit if valid is None else hit & valid]
 
 
 def check_cycles(n_ccw, n_cw, program, min_cycles, dropped):

@@ -89,9 +89,7 @@ def analyze(recording, options=None, program=None):
         reach_s=data.reach_s,
     )
     q.check_period(seg.period_disagreement, seg.period_s, prog)
-    clipped = q.clipped_times(
-        data.t_s[data.valid], data.raw[data.valid], recording.sensor.range_m_s2
-    )
+    clipped = q.clipped_times(data.t_s, data.raw, recording.sensor.range_m_s2, data.valid)
     bad = bad_intervals(data.gap_spans_s, clipped)
     cyc = cycle_traces(
         data.t_s,
