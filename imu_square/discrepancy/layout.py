@@ -18,10 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.pipeline.align import bad_intervals, cycle_traces
-from imu_square.pipeline.filter import filter_recording
-from imu_square.pipeline.quality import clipped_times
-from imu_square.pipeline.segment import block_events, segment
+from imu_square.pipeline.squareness import filter_and_segment, trace_cycles
 
 # Window around each axis reversal for the reversal view: before and after it. [s]
 REVERSAL_BEFORE_S = 0.05
@@ -227,29 +224,8 @@ def layout_from_recording(recording, program, options):
     AnalysisError
         Where the pipeline refuses the recording (no circle, wrong direction, ...).
     """
-    data = filter_recording(recording, options.cutoff_hz, options.order, program.frequency_hz)
-    seg = segment(
-        data.t_s,
-        data.xy,
-        program,
-        block_events(recording),
-        data.margin_s,
-        gaps_s=data.long_gap_spans_s,
-        short_gaps_s=data.short_gap_spans_s,
-        reach_s=data.reach_s,
-    )
-    clipped = clipped_times(data.t_s[data.valid], data.raw[data.valid], recording.sensor.range_m_s2)
-    bad = bad_intervals(data.gap_spans_s, clipped)
-    cyc = cycle_traces(
-        data.t_s,
-        data.xy,
-        seg,
-        bad,
-        data.margin_s,
-        grid_points=8,
-        missing_s=data.bridged_spans_s,
-        onset_margin_s=data.onset_margin_s,
-    )
+    data, seg = filter_and_segment(recording, program, options.cutoff_hz, options.order)
+    _, cyc = trace_cycles(recording, data, seg, grid_points=8)
     prog = seg.program
     # the recorded samples only: the filter's bridged ones are not data
     t_all = recording.time_s

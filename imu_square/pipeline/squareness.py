@@ -52,6 +52,73 @@ from imu_square.pipeline.uncertainty import coverage_factor, type_a
 __all__ = ["AnalysisOptions", "DirectionResult", "RunResult", "analyze"]
 
 
+def filter_and_segment(recording, program, cutoff_hz, order):
+    """Low-pass a recording (short gaps bridged) and find the program's blocks in it.
+
+    Parameters
+    ----------
+    recording : Recording
+        The test as recorded.
+    program : TestProgram
+        The program it ran.
+    cutoff_hz : float or None
+        Low-pass cutoff; None for 8 pi x the circle frequency. [Hz]
+    order : int
+        Low-pass order.
+
+    Returns
+    -------
+    data : FilteredRecording
+    seg : Segmentation
+    """
+    data = filter_recording(recording, cutoff_hz, order, program.frequency_hz)
+    seg = segment(
+        data.t_s,
+        data.xy,
+        program,
+        block_events(recording),
+        data.margin_s,
+        gaps_s=data.long_gap_spans_s,
+        short_gaps_s=data.short_gap_spans_s,
+        reach_s=data.reach_s,
+    )
+    return data, seg
+
+
+def trace_cycles(recording, data, seg, grid_points):
+    """The usable whole cycles on the position-angle grid, clipping and gaps left out.
+
+    Parameters
+    ----------
+    recording : Recording
+        The test as recorded (its sensor's range).
+    data : FilteredRecording
+        From :func:`filter_and_segment`.
+    seg : Segmentation
+        From :func:`filter_and_segment`.
+    grid_points : int
+        Points of the phi grid per cycle.
+
+    Returns
+    -------
+    clipped : ndarray
+        Times of clipped samples. [s]
+    cyc : CycleTraces
+    """
+    clipped = q.clipped_times(data.t_s, data.raw, recording.sensor.range_m_s2, data.valid)
+    cyc = cycle_traces(
+        data.t_s,
+        data.xy,
+        seg,
+        bad_intervals(data.gap_spans_s, clipped),
+        data.margin_s,
+        grid_points,
+        missing_s=data.bridged_spans_s,
+        onset_margin_s=data.onset_margin_s,
+    )
+    return clipped, cyc
+
+
 def analyze(recording, options=None, program=None):
     """Squareness, sensor rotation and servo mismatch of one recording.
 
@@ -77,30 +144,9 @@ def analyze(recording, options=None, program=None):
     """
     opts = options or AnalysisOptions()
     prog = _program_of(recording, program)
-    data = filter_recording(recording, opts.cutoff_hz, opts.order, prog.frequency_hz)
-    seg = segment(
-        data.t_s,
-        data.xy,
-        prog,
-        block_events(recording),
-        data.margin_s,
-        gaps_s=data.long_gap_spans_s,
-        short_gaps_s=data.short_gap_spans_s,
-        reach_s=data.reach_s,
-    )
+    data, seg = filter_and_segment(recording, prog, opts.cutoff_hz, opts.order)
     q.check_period(seg.period_disagreement, seg.period_s, prog)
-    clipped = q.clipped_times(data.t_s, data.raw, recording.sensor.range_m_s2, data.valid)
-    bad = bad_intervals(data.gap_spans_s, clipped)
-    cyc = cycle_traces(
-        data.t_s,
-        data.xy,
-        seg,
-        bad,
-        data.margin_s,
-        opts.grid_points,
-        missing_s=data.bridged_spans_s,
-        onset_margin_s=data.onset_margin_s,
-    )
+    clipped, cyc = trace_cycles(recording, data, seg, opts.grid_points)
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
     norm, irls = opts.robust_norm(), opts.irls()
