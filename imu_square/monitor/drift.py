@@ -200,19 +200,7 @@ def fit_night_drift(result, recording, reference=None):
     design = np.column_stack([np.ones_like(x), d, x - x_ref])
     fit = sm.OLS(y, design).fit()
     plain = sm.OLS(y, design[:, :2]).fit()
-    return DriftFit(
-        regressor=regressor,
-        slope_rad_per_unit=float(fit.params[2]),
-        u_slope_rad_per_unit=float(fit.bse[2]),
-        p_value=float(fit.pvalues[2]),
-        reference=x_ref,
-        value_at_reference_rad=float(fit.params[0]),
-        u_value_at_reference_rad=float(fit.bse[0]),
-        uncorrected_rad=float(plain.params[0]),
-        u_uncorrected_rad=float(plain.bse[0]),
-        n=int(y.size),
-        dof=int(fit.df_resid),
-    )
+    return _drift_fit(regressor, x_ref, fit, plain, slope=2)
 
 
 def fit_run_drift(values_rad, u_rad, x, regressor, reference=None):
@@ -250,17 +238,22 @@ def fit_run_drift(values_rad, u_rad, x, regressor, reference=None):
     design = np.column_stack([np.ones_like(x), x - x_ref])
     fit = sm.WLS(y, design, weights=w).fit()
     plain = sm.WLS(y, design[:, :1], weights=w).fit()
+    return _drift_fit(regressor, x_ref, fit, plain, slope=1)
+
+
+def _drift_fit(regressor, x_ref, fit, plain, slope):
+    """A :class:`DriftFit` from the statsmodels fit with the slope and the one without."""
     return DriftFit(
         regressor=regressor,
-        slope_rad_per_unit=float(fit.params[1]),
-        u_slope_rad_per_unit=float(fit.bse[1]),
-        p_value=float(fit.pvalues[1]),
+        slope_rad_per_unit=float(fit.params[slope]),
+        u_slope_rad_per_unit=float(fit.bse[slope]),
+        p_value=float(fit.pvalues[slope]),
         reference=x_ref,
         value_at_reference_rad=float(fit.params[0]),
         u_value_at_reference_rad=float(fit.bse[0]),
         uncorrected_rad=float(plain.params[0]),
         u_uncorrected_rad=float(plain.bse[0]),
-        n=int(y.size),
+        n=int(fit.nobs),
         dof=int(fit.df_resid),
     )
 
