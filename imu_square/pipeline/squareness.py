@@ -238,17 +238,23 @@ def _direction(mean, i, n_cycles, outliers):
     )
 
 
-def _cycle_temperatures(recording, t_s, t_mid_s, period_s):
-    """Mean sensor temperature over each cycle; NaN without a temperature channel. [degC]"""
+def _cycle_temperatures(recording, t_s, t_ccw_s, t_cw_s, period_s):
+    """Mean sensor temperature over each CCW and CW cycle; NaN without a channel. [degC]"""
+    t_mid = np.concatenate([t_ccw_s, t_cw_s])
     if recording.temperature_c is None:
-        return np.full(t_mid_s.shape, np.nan)
-    lo = np.searchsorted(t_s, t_mid_s - 0.5 * period_s)
-    hi = np.searchsorted(t_s, t_mid_s + 0.5 * period_s)
-    csum = np.concatenate([[0.0], np.cumsum(recording.temperature_c)])
-    return (csum[hi] - csum[lo]) / np.maximum(hi - lo, 1)
+        means = np.full(t_mid.shape, np.nan)
+    else:
+        lo = np.searchsorted(t_s, t_mid - 0.5 * period_s)
+        hi = np.searchsorted(t_s, t_mid + 0.5 * period_s)
+        csum = np.concatenate([[0.0], np.cumsum(recording.temperature_c)])
+        means = (csum[hi] - csum[lo]) / np.maximum(hi - lo, 1)
+    return means[: len(t_ccw_s)], means[len(t_ccw_s) :]
 
 
 def _per_cycle(cycles, recording, t_s, period_s):
+    temperature_ccw, temperature_cw = _cycle_temperatures(
+        recording, t_s, cycles.t_ccw_s, cycles.t_cw_s, period_s
+    )
     return {
         "pair": cycles.pair,
         "squareness_rad": cycles.squareness_rad,
@@ -258,8 +264,8 @@ def _per_cycle(cycles, recording, t_s, period_s):
         "eps_c_rad": cycles.eps_c_rad,
         "t_ccw_s": cycles.t_ccw_s,
         "t_cw_s": cycles.t_cw_s,
-        "temperature_ccw_c": _cycle_temperatures(recording, t_s, cycles.t_ccw_s, period_s),
-        "temperature_cw_c": _cycle_temperatures(recording, t_s, cycles.t_cw_s, period_s),
+        "temperature_ccw_c": temperature_ccw,
+        "temperature_cw_c": temperature_cw,
     }
 
 
