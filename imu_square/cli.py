@@ -3,9 +3,11 @@
 Subcommands are the modules of :mod:`imu_square.commands`, plus the modules of
 any package registered under the ``imu_square.commands`` entry-point group
 (the ``acquisition`` package registers its own that way, so the library never
-imports it). Each module defines ``register(subparsers)``, which adds one
-parser whose ``func`` default takes the parsed arguments and returns an exit
-code.
+imports it). Each module defines ``HELP``, its one-line summary as a string
+literal, and ``register(subparsers)``, which adds one parser (with that help)
+whose ``func`` default takes the parsed arguments and returns an exit code.
+``imu-square --help`` reads every ``HELP`` from the modules' source without
+importing them, so that listing the commands costs no command's imports.
 
 Human-readable text goes to stderr; machine-readable results go to stdout.
 A user's mistake is one line on stderr and a non-zero exit, never a traceback.
@@ -18,13 +20,16 @@ I/O error), what was flushed before is kept; 130 interrupted.
 """
 
 import argparse
+import ast
 import importlib
+import importlib.util
 import logging
 import os
 import pkgutil
 import sys
 import warnings
 from importlib.metadata import entry_points
+from pathlib import Path
 
 from imu_square import __version__
 from imu_square.errors import ImuSquareError, OutputWriteError
@@ -62,13 +67,14 @@ def commands():
 
 
 def build_parser(only=None):
-    """The argument parser with every subcommand registered, or only ``only``.
+    """The argument parser: every subcommand listed, or ``only`` registered in full.
 
     Parameters
     ----------
     only : str, optional
         The one command to register (and so to import): a command pays only
-        for its own imports at start-up.
+        for its own imports at start-up. Without it, every command is listed
+        by its ``HELP`` alone, none imported: the parser of ``imu-square --help``.
 
     Returns
     -------
@@ -87,9 +93,45 @@ def build_parser(only=None):
     parser.add_argument("-q", "--quiet", action="store_true", help="errors only")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in commands().items():
-        if only is None or name == only:
+        if only is None:
+            sub.add_parser(name, help=command_help(module), add_help=False)
+        elif name == only:
             importlib.import_module(module).register(sub)
     return parser
+
+
+def command_help(module):
+    """A command module's ``HELP``, read from its source without importing it.
+
+    Parameters
+    ----------
+    module : str
+        Dotted name of the command module.
+
+    Returns
+    -------
+    str
+        The one-line summary that ``imu-square --help`` lists.
+    """
+    tree = ast.parse(_module_source(module).read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == [
+            "HELP"
+        ]:
+            return ast.literal_eval(node.value)
+    raise LookupError(f"command module {module} defines no HELP string")
+
+
+def _module_source(module):
+    """Path of a module's source file, found without importing the module or its packages
+    (``importlib.util.find_spec`` would import ``acquisition`` for its commands)."""
+    top, *rest = module.split(".")
+    spec = importlib.util.find_spec(top)
+    where = Path(next(iter(spec.submodule_search_locations)))
+    for part in rest[:-1]:
+        where = where / part
+    leaf = where / rest[-1]
+    return leaf / "__init__.py" if leaf.is_dir() else leaf.with_suffix(".py")
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

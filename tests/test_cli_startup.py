@@ -1,13 +1,14 @@
 """Start-up pays only for the command run: no matplotlib, scipy.optimize or acquisition
 unless that command needs them (issue 10: 0.8 s of CPU and 75 MiB for every command before)."""
 
+import importlib
 import json
 import subprocess
 import sys
 
 import pytest
 
-from imu_square.cli import commands
+from imu_square.cli import build_parser, command_help, commands
 
 HEAVY = ("matplotlib", "scipy.optimize", "acquisition")
 # what each command may pull in at start-up, because registering it needs it
@@ -48,3 +49,43 @@ def test_importing_the_package_is_light():
         check=True,
     ).stdout
     assert "numpy" not in out and "matplotlib" not in out and "acquisition" not in out
+
+
+LISTING = """
+import contextlib, io, json, sys
+from imu_square.cli import main
+out = io.StringIO()
+with contextlib.redirect_stdout(out):
+    try:
+        main(["--help"])
+    except SystemExit as exc:
+        code = exc.code
+loaded = sorted(m for m in sys.modules if m.split(".")[0] in ("numpy", "scipy", "matplotlib",
+                "acquisition") or m.startswith("imu_square.commands."))
+print(json.dumps({"code": code, "help": out.getvalue(), "loaded": loaded}))
+"""
+
+
+def test_the_command_listing_imports_no_command():
+    got = json.loads(
+        subprocess.run(
+            [sys.executable, "-c", LISTING], capture_output=True, text=True, check=True
+        ).stdout
+    )
+    assert got["code"] == 0
+    assert got["loaded"] == [], f"`imu-square --help` imported {got['loaded']}"
+    listed = " ".join(got["help"].split())
+    for name in commands():
+        assert f" {name} " in listed, f"{name} missing from the listing"
+
+
+@pytest.mark.parametrize("name", sorted(commands()))
+def test_the_listing_shows_what_the_command_registers(name):
+    """The help read from the source is the one the command's own parser carries."""
+    module = commands()[name]
+    listed = command_help(module)
+    parser = build_parser(only=name)
+    sub = next(a for a in parser._actions if a.dest == "command")
+    registered = next(c.help for c in sub._choices_actions if c.dest == name)
+    assert listed == registered == importlib.import_module(module).HELP
+    assert listed and "\n" not in listed

@@ -5,12 +5,14 @@ import secrets
 import sys
 from pathlib import Path
 
+HELP = "emulate a serial accelerometer board on a pseudo-terminal"
+
 
 def register(sub):
     """Add the ``emulate`` subcommand."""
     p = sub.add_parser(
         "emulate",
-        help="emulate a serial accelerometer board on a pseudo-terminal",
+        help=HELP,
         description="Simulate a circle test and stream it through the wire protocol on a "
         "pseudo-terminal symlinked at --link, in real time on the board's sample clock. "
         "Writes the simulator's truth and the exact fault log as JSON and prints its path. "

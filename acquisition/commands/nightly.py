@@ -20,12 +20,14 @@ import threading
 import time
 from pathlib import Path
 
+HELP = "record and analyse one nightly run (emulated sensor unless --port is given)"
+
 
 def register(sub):
     """Add the ``nightly`` subcommand."""
     p = sub.add_parser(
         "nightly",
-        help="record and analyse one nightly run (emulated sensor unless --port is given)",
+        help=HELP,
         description="Record one circle test and analyse it: writes RUN.mcap, RUN.result.json "
         "and RUN.png into --out. Without --port, an emulated board streams a simulated machine "
         "(built-in: the paper's test on a typical machine with the paper's sensor) through a "

@@ -13,11 +13,14 @@ EXIT_CODES = (
 )
 
 
+HELP = "record a circle test from a serial accelerometer board into MCAP"
+
+
 def register(sub):
     """Add the ``record`` subcommand."""
     p = sub.add_parser(
         "record",
-        help="record a circle test from a serial accelerometer board into MCAP",
+        help=HELP,
         description="Read an imu-square board (binary or line protocol) from a serial port, "
         "reconnecting after unplugging, and stream the samples into an MCAP file, flushed "
         "every second. " + EXIT_CODES,

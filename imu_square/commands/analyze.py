@@ -5,12 +5,14 @@ import sys
 
 from imu_square.errors import ImuSquareError
 
+HELP = "squareness from recorded runs"
+
 
 def register(sub):
     """Add the ``analyze`` subcommand."""
     p = sub.add_parser(
         "analyze",
-        help="squareness from recorded runs",
+        help=HELP,
         description="Filter, segment, flip, average and fit each recording; print the "
         "squareness (theta_y - theta_x) with its uncertainty. Human summary on stderr; "
         "--json writes one JSON object per run to stdout.",

@@ -7,12 +7,14 @@ import sys
 from imu_square.commands._monitor import add_config_argument, monitor_session
 from imu_square.errors import ImuSquareError
 
+HELP = "set, show or anchor a machine's baseline (its squareness when monitoring began)"
+
 
 def register(sub):
     """Add the ``baseline`` subcommand."""
     p = sub.add_parser(
         "baseline",
-        help="set, show or anchor a machine's baseline (its squareness when monitoring began)",
+        help=HELP,
         description="The baseline is the machine's own theta_y - theta_x when the monitor was "
         "set up, the mean of at least 3 valid runs; every night's change is measured against "
         "it. An anchor by a reference method (a ballbar's value, or ISO 230-6 laser diagonals) "

@@ -8,12 +8,14 @@ from imu_square.errors import ImuSquareError
 from imu_square.reference import REFERENCE_LINES
 from imu_square.units import MM
 
+HELP = "ballbar, diagonal, L/T/+ and the IMU circle test side by side on a machine file"
+
 
 def register(sub):
     """Add the ``compare`` subcommand."""
     p = sub.add_parser(
         "compare",
-        help="ballbar, diagonal, L/T/+ and the IMU circle test side by side on a machine file",
+        help=HELP,
         description="Simulate on the machine file's errors what each squareness method reads, "
         "in the layout of Chapman's figures (a ballbar, full circle and 220° arc, per location "
         "and averaged; b diagonal; c +, d T, e L in four orientations), and the IMU circle test "

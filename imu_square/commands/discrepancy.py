@@ -3,12 +3,14 @@
 import json
 import sys
 
+HELP = "fit the simulator to a recording, name the missing effects, show the gap shrink"
+
 
 def register(sub):
     """Add the ``discrepancy`` subcommand."""
     p = sub.add_parser(
         "discrepancy",
-        help="fit the simulator to a recording, name the missing effects, show the gap shrink",
+        help=HELP,
         description="Fit the simulator (the paper's model: squareness, sensor rotation and "
         "offsets) to a recording, show where they disagree in views normalised by the noise "
         "floor, add the effect of the simulator's vocabulary that best explains the gap, "

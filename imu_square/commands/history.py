@@ -8,12 +8,14 @@ from datetime import UTC, datetime
 from imu_square.commands._monitor import add_config_argument, monitor_session
 from imu_square.errors import ImuSquareError
 
+HELP = "a machine's runs and verdicts, its trend chart, or a back-up of the history"
+
 
 def register(sub):
     """Add the ``history`` subcommand."""
     p = sub.add_parser(
         "history",
-        help="a machine's runs and verdicts, its trend chart, or a back-up of the history",
+        help=HELP,
         description="Print the machine's runs with the monitor's verdict on each (against the "
         "current baseline), or write them as JSON, or draw the trend chart with the alarm "
         "limits, the baseline band, anchors, remounts and invalid runs marked. --backup copies "

@@ -12,12 +12,14 @@ from imu_square.io.recording import SensorInfo
 from imu_square.program import read_program
 from imu_square.units import UG, G
 
+HELP = "convert a CSV recording to MCAP"
+
 
 def register(sub):
     """Add the ``import`` subcommand."""
     p = sub.add_parser(
         "import",
-        help="convert a CSV recording to MCAP",
+        help=HELP,
         description="Read accelerometer samples from CSV, check their units against gravity, "
         "and write them with the test program to an MCAP recording.",
     )

@@ -6,12 +6,14 @@ from imu_square.cli import EXIT_INCOMPLETE
 from imu_square.io.mcap import scan_mcap, summarize
 from imu_square.units import UG
 
+HELP = "summarise an MCAP recording"
+
 
 def register(sub):
     """Add the ``info`` subcommand."""
     p = sub.add_parser(
         "info",
-        help="summarise an MCAP recording",
+        help=HELP,
         description="Print what an MCAP recording holds: samples, gaps, channels, program, "
         "sensor, events, and how the recorder said the run went. Exit codes: 0 a complete "
         "file; 3 incomplete: the file is cut (imu-square recover rewrites what it holds) or "

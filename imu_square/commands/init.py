@@ -6,12 +6,14 @@ from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 
+HELP = "write a monitor file for a machine, and its nightly systemd units"
+
 
 def register(sub):
     """Add the ``init`` subcommand."""
     p = sub.add_parser(
         "init",
-        help="write a monitor file for a machine, and its nightly systemd units",
+        help=HELP,
         description="Write a commented monitor file (monitor.toml) for one machine, then print "
         "the systemd service and timer that run 'imu-square nightly --config FILE' every night "
         "at --at, and the equivalent crontab line. With --systemd DIR the units are written to "

@@ -5,12 +5,14 @@ import math
 import sys
 from pathlib import Path
 
+HELP = "plan a circle test: radius, feed(s), cycles and dwell for a sensor and a machine"
+
 
 def register(sub):
     """Add the ``plan`` subcommand."""
     p = sub.add_parser(
         "plan",
-        help="plan a circle test: radius, feed(s), cycles and dwell for a sensor and a machine",
+        help=HELP,
         description="Choose the circle test that detects the smallest change of squareness in "
         "the time given, within the machine's and the sensor's limits; predict the standard "
         "deviation of one run and of the change against a baseline, the smallest change "

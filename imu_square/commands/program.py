@@ -7,12 +7,14 @@ from imu_square.errors import ProgramError
 from imu_square.program import read_program
 from imu_square.program.ncgen import DIALECTS, generate_nc
 
+HELP = "validate a test program and write its NC code"
+
 
 def register(sub):
     """Add the ``program`` subcommand."""
     p = sub.add_parser(
         "program",
-        help="validate a test program and write its NC code",
+        help=HELP,
         description="Validate PROGRAM.toml, print its nominal timing and, with -o, write the "
         "warm-up cycle as NC code for the chosen control.",
     )

@@ -7,12 +7,14 @@ from imu_square.errors import OutputError
 from imu_square.io.mcap import recover_mcap
 from imu_square.io.output import check_output_path
 
+HELP = "rescue the complete part of a cut or damaged MCAP recording"
+
 
 def register(sub):
     """Add the ``recover`` subcommand."""
     p = sub.add_parser(
         "recover",
-        help="rescue the complete part of a cut or damaged MCAP recording",
+        help=HELP,
         description="Read a cut or damaged MCAP recording from the start, keep every complete "
         "chunk, and write it as a whole file with indexes. Exit codes: 0 written; 2 nothing "
         "recoverable, or the output cannot be written there (checked first: its folder must "

@@ -22,11 +22,14 @@ from imu_square.units import MM, SQUARENESS_UNIT, URAD
 METHODS = ("ballbar", "diagonal", "L", "T", "+")
 
 
+HELP = "squareness a ballbar, laser diagonal or L/T/+ test would give on a machine file"
+
+
 def register(sub):
     """Add the ``reference`` subcommand."""
     p = sub.add_parser(
         "reference",
-        help="squareness a ballbar, laser diagonal or L/T/+ test would give on a machine file",
+        help=HELP,
         description="Simulate the ISO 230 reference squareness tests on the geometric errors of "
         "a machine file, over the full travel (global tests). L and T are run in all four "
         "orientations.",

@@ -7,12 +7,14 @@ import time
 from imu_square.commands._monitor import add_config_argument
 from imu_square.errors import ImuSquareError
 
+HELP = "replay recorded runs into a machine's history (local processes or Dask)"
+
 
 def register(sub):
     """Add the ``replay`` subcommand."""
     p = sub.add_parser(
         "replay",
-        help="replay recorded runs into a machine's history (local processes or Dask)",
+        help=HELP,
         description="Analyse recordings (files, folders searched recursively, globs, or fsspec "
         "URLs) into the machine's history, in parallel, then judge the whole history again in "
         "recording-time order and say when the alarms would have fired. A recording already "

@@ -4,12 +4,14 @@ import sys
 
 from imu_square.commands._monitor import add_config_argument, monitor_session
 
+HELP = "write a self-contained HTML report of a machine's squareness"
+
 
 def register(sub):
     """Add the ``report`` subcommand."""
     p = sub.add_parser(
         "report",
-        help="write a self-contained HTML report of a machine's squareness",
+        help=HELP,
         description="One HTML file with everything inline: the verdict, the trend chart, the "
         "last valid run in the paper's Fig. 5 style, eps_c and the sensor temperature over "
         "time, the baseline with its anchors, the alarm design, and the latest nights.",

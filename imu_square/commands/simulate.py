@@ -15,12 +15,14 @@ from imu_square.simulate import (
 )
 from imu_square.units import SQUARENESS_UNIT, URAD
 
+HELP = "simulate a circle test (physics of machine and sensor) with its ground truth"
+
 
 def register(sub):
     """Add the ``simulate`` subcommand."""
     p = sub.add_parser(
         "simulate",
-        help="simulate a circle test (physics of machine and sensor) with its ground truth",
+        help=HELP,
         description="Simulate the accelerometer recording of a circle test and write it as "
         "MCAP, with the ground truth as JSON next to it (run.mcap -> run.truth.json). "
         "Program, machine and sensor default to the built-in paper test, ideal machine "
