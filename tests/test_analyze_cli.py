@@ -100,3 +100,24 @@ def test_real_rectangle_through_import_and_analyze(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "no circular motion matching the program" in err[0]
+
+
+def test_a_run_given_twice_counts_once(tmp_path, capsys):
+    # the same samples twice (by path or by a copy) would count one run twice in the mean
+    # of runs and shrink its type A uncertainty by sqrt(2)
+    good, _ = _write(tmp_path, "good.mcap", density=1e-6)
+    copy = tmp_path / "copy.mcap"
+    copy.write_bytes(good.read_bytes())
+    code = main(["analyze", str(good), str(good), str(copy), "--json", "--bootstrap", "0"])
+    out, err = capsys.readouterr()
+    assert code == 2
+    docs = [json.loads(line) for line in out.strip().splitlines()]
+    assert [d["recording"] for d in docs] == [str(good)]
+    assert docs[0]["convergence"]["n_runs"] == [1]
+    errors = [line for line in err.splitlines() if "error" in line]
+    assert errors == [
+        f"imu-square analyze: error: recordings: {good} and {second} hold the same samples: "
+        "give each run once (a run counted twice would halve its variance)"
+        for second in (good, copy)
+    ]
+    assert "after 2 runs" not in err

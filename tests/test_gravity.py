@@ -194,10 +194,17 @@ def test_cli_refuses_two_feeds_without_the_flag_and_one_feed_with_it(tmp_path, c
     write_run(path, one, one_truth)
     assert main(["analyze", str(path), "--separate-gravity"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    # the feed's plain result first, then the one-line error
-    assert err[0].startswith(f"{path} at 6000 mm/min: squareness ")
-    assert err[-1].startswith("imu-square analyze: error: separating gravity coupling")
-    assert "needs the same circle at two feeds or more" in err[-1] and "got 6000 mm/min" in err[-1]
+    # refused from the program, before any feed is analysed: one line, no result
+    assert len(err) == 1, err
+    assert err[0].startswith("imu-square analyze: error: separating gravity coupling")
+    assert "needs the same circle at two feeds or more" in err[0] and "got 6000 mm/min" in err[0]
+    other = TestProgram(radius_m=0.05, feeds_m_per_s=(0.05,), cycles_per_feed=(3,), dwell_s=2.0)
+    part, part_truth = simulate_run(other, MACHINE, SENSOR, seed=6)
+    small = tmp_path / "small.mcap"
+    write_run(small, part, part_truth)
+    assert main(["analyze", str(path), str(small), "--separate-gravity"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the feeds must run the same circle" in err[0], err
 
 
 @pytest.mark.slow

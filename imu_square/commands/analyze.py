@@ -78,9 +78,11 @@ def run(args):
         return _run_separated(args, options, program)
     results = []
     status = 0
+    seen = {}
     for path in args.recordings:
         try:
             recording = read_mcap(path)  # its errors name the file
+            _check_new(seen, path, recording)
             _check_one_feed(program or recording.program)
             result = analyze(recording, options, program=program)
         except AnalysisError as exc:  # the pipeline names no file: say which
@@ -156,14 +158,19 @@ def _run_separated(args, options, program):
 
 def _check_distinct(sources):
     """Refuse one run given twice: its feeds would count twice and shrink the uncertainty."""
-    import hashlib
-
     seen = {}
     for path, recording in sources:
-        digest = hashlib.sha256(recording.accel.tobytes()).hexdigest()
-        if digest in seen:
-            raise ImuSquareError(
-                f"recordings: {seen[digest]} and {path} hold the same samples: give each run "
-                "once (a run counted twice would halve its variance)"
-            )
-        seen[digest] = path
+        _check_new(seen, path, recording)
+
+
+def _check_new(seen, path, recording):
+    """Refuse a recording whose samples ``seen`` (digest to path) holds already; add it."""
+    import hashlib
+
+    digest = hashlib.sha256(recording.accel.tobytes()).hexdigest()
+    if digest in seen:
+        raise ImuSquareError(
+            f"recordings: {seen[digest]} and {path} hold the same samples: give each run "
+            "once (a run counted twice would halve its variance)"
+        )
+    seen[digest] = path

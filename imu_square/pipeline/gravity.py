@@ -206,19 +206,29 @@ class GravitySeparation:
         }
 
 
-def _check_same_circle(feeds):
-    first = feeds[0].program
-    for f in feeds[1:]:
-        p = f.program
+def _check_feeds(planned):
+    """Refuse fewer than two feeds, or feeds of different circles.
+
+    ``planned`` is ``(source, one-feed program)`` of each feed: known before any
+    analysis, so that a wrong input is refused before the work.
+    """
+    if len(planned) < 2:
+        got = ", ".join(f"{p.feed_m_per_s / MM_PER_MIN:g}" for _, p in planned) or "none"
+        raise AnalysisError(
+            "separating gravity coupling needs the same circle at two feeds or more: a recording "
+            f"of a program with feeds_mm_per_min, or one recording per feed; got {got} mm/min"
+        )
+    source0, first = planned[0]
+    for source, p in planned[1:]:
         if (
             abs(p.radius_m - first.radius_m) > SAME_CIRCLE_M
             or math.dist(p.centre_m, first.centre_m) > SAME_CIRCLE_M
             or p.plane != first.plane
         ):
             raise AnalysisError(
-                f"the feeds must run the same circle: {feeds[0].source} has r = "
+                f"the feeds must run the same circle: {source0} has r = "
                 f"{first.radius_m / MM:g} mm at centre {[c / MM for c in first.centre_m]} mm, "
-                f"{f.source} r = {p.radius_m / MM:g} mm at {[c / MM for c in p.centre_m]} mm"
+                f"{source} r = {p.radius_m / MM:g} mm at {[c / MM for c in p.centre_m]} mm"
             )
 
 
@@ -254,13 +264,7 @@ def separate_gravity(feeds):
         close to separate anything.
     """
     feeds = tuple(feeds)
-    if len(feeds) < 2:
-        got = ", ".join(f"{f.feed_mm_per_min:g}" for f in feeds) or "none"
-        raise AnalysisError(
-            "separating gravity coupling needs the same circle at two feeds or more: a recording "
-            f"of a program with feeds_mm_per_min, or one recording per feed; got {got} mm/min"
-        )
-    _check_same_circle(feeds)
+    _check_feeds([(f.source, f.program) for f in feeds])
     amp = np.array([f.amplitude_m_s2 for f in feeds])
     if amp.max() < MIN_FEED_RATIO**2 * amp.min():
         raise AnalysisError(
@@ -338,15 +342,19 @@ def analyze_feeds(sources, options=None, program=None):
     Raises
     ------
     AnalysisError
-        From the split or the analysis of a feed; the message names the
-        source and the feed.
+        Fewer than two feeds or feeds of different circles (before any
+        analysis); from the split or the analysis of a feed, with a message
+        that names the source and the feed.
     """
-    out = []
+    split = []
     for name, recording in sources:
         try:
-            parts = split_feeds(recording, program, options)
+            split.append((name, split_feeds(recording, program, options)))
         except AnalysisError as exc:
             raise AnalysisError(f"{name}: {exc}") from None
+    _check_feeds([(name, part.program) for name, parts in split for part in parts])
+    out = []
+    for name, parts in split:
         for part in parts:
             try:
                 result = analyze(part.recording, options, program=part.program)
