@@ -105,6 +105,44 @@ class PlanError(ImuSquareError):
     """No circle test fits the limits and the time given."""
 
 
+class PlanInputError(PlanError):
+    """An input outside what a plan can use.
+
+    Attributes
+    ----------
+    parameter : str
+        The field it came from, e.g. ``"max_feed_m_s"`` (``Limits.max_feed_m_s``).
+    value : float
+        What was given, in the field's SI unit.
+    bounds : tuple of float
+        ``(lo, hi)``, in the same unit.
+    closed : tuple of bool
+        Whether ``lo`` and ``hi`` are allowed.
+    """
+
+    def __init__(self, parameter, label, value, bounds, closed):
+        self.parameter, self.value, self.bounds, self.closed = parameter, value, bounds, closed
+        super().__init__(f"{label} must be in {interval(bounds, closed)}, got {value!r}")
+
+
+def interval(bounds, closed):
+    """``(lo, hi]`` and the like, for messages.
+
+    Parameters
+    ----------
+    bounds : tuple of float
+        ``(lo, hi)``, in any one unit.
+    closed : tuple of bool
+        Whether each end is allowed.
+
+    Returns
+    -------
+    str
+    """
+    (lo, hi), (lo_in, hi_in) = bounds, closed
+    return f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+
+
 @dataclass(frozen=True)
 class SensorSpec:
     """What the planner needs of the sensor.
@@ -615,15 +653,14 @@ def _fastest(program, name="centripetal_m_s2"):
     return max(getattr(program.at_feed(f), name) for f in range(program.n_feeds))
 
 
-def _check(name, value, lo, hi, lo_open=True, hi_open=False):
+def _check(parameter, label, value, lo, hi, lo_open=True, hi_open=False):
     ok = (
         (lo < value if lo_open else lo <= value)
         and (value < hi if hi_open else value <= hi)
         and math.isfinite(value)
     )
     if not ok:
-        left, right = "(" if lo_open else "[", ")" if hi_open else "]"
-        raise PlanError(f"{name} must be in {left}{lo:g}, {hi:g}{right}, got {value!r}")
+        raise PlanInputError(parameter, label, value, (lo, hi), (not lo_open, not hi_open))
 
 
 def check_inputs(sensor, limits, goal):
@@ -631,27 +668,55 @@ def check_inputs(sensor, limits, goal):
 
     Raises
     ------
-    PlanError
+    PlanInputError
+        Its ``parameter`` names the field, for a caller that names its own
+        option in its own units.
     """
-    _check("noise density [m/s^2/sqrt(Hz)]", sensor.noise_density_m_s2_rthz, 0.0, 1.0)
-    _check("flicker corner [Hz]", sensor.flicker_corner_hz, 0.0, 1e3, lo_open=False)
-    _check("range [m/s^2]", sensor.range_m_s2, 0.0, 1e4)
-    _check("sample rate [Hz]", sensor.sample_rate_hz, 0.0, 1e6)
-    _check("resolution [m/s^2]", sensor.resolution_m_s2, 0.0, 1.0, lo_open=False)
-    _check("max feed [m/s]", limits.max_feed_m_s, 0.0, 10.0)
-    _check("max centripetal acceleration [m/s^2]", limits.max_accel_m_s2, 0.0, 1e3)
-    _check("travel [m]", limits.travel_m, 2 * MIN_RADIUS_M, 10.0, lo_open=False)
-    _check("time [s]", limits.time_s, 0.0, 1e6)
+    _check(
+        "noise_density_m_s2_rthz",
+        "noise density [m/s^2/sqrt(Hz)]",
+        sensor.noise_density_m_s2_rthz,
+        0.0,
+        1.0,
+    )
+    _check(
+        "flicker_corner_hz",
+        "flicker corner [Hz]",
+        sensor.flicker_corner_hz,
+        0.0,
+        1e3,
+        lo_open=False,
+    )
+    _check("range_m_s2", "range [m/s^2]", sensor.range_m_s2, 0.0, 1e4)
+    _check("sample_rate_hz", "sample rate [Hz]", sensor.sample_rate_hz, 0.0, 1e6)
+    _check("resolution_m_s2", "resolution [m/s^2]", sensor.resolution_m_s2, 0.0, 1.0, lo_open=False)
+    _check("max_feed_m_s", "max feed [m/s]", limits.max_feed_m_s, 0.0, 10.0)
+    _check(
+        "max_accel_m_s2",
+        "max centripetal acceleration [m/s^2]",
+        limits.max_accel_m_s2,
+        0.0,
+        1e3,
+    )
+    _check("travel_m", "travel [m]", limits.travel_m, 2 * MIN_RADIUS_M, 10.0, lo_open=False)
+    _check("time_s", "time [s]", limits.time_s, 0.0, 1e6)
     for lag in limits.servo_lags_s:
-        _check("servo lag [s]", lag, 0.0, 1.0, lo_open=False)
-    _check("sensor rotation eps_c [rad]", limits.eps_c_rad, 0.0, math.pi / 4, lo_open=False)
-    _check("ramp [s]", limits.ramp_s, 0.0, 5.0, lo_open=False)
-    _check("confidence", goal.confidence, 0.0, 1.0, hi_open=True)
+        _check("servo_lags_s", "servo lag [s]", lag, 0.0, 1.0, lo_open=False)
+    _check(
+        "eps_c_rad",
+        "sensor rotation eps_c [rad]",
+        limits.eps_c_rad,
+        0.0,
+        math.pi / 4,
+        lo_open=False,
+    )
+    _check("ramp_s", "ramp [s]", limits.ramp_s, 0.0, 5.0, lo_open=False)
+    _check("confidence", "confidence", goal.confidence, 0.0, 1.0, hi_open=True)
     if goal.change_rad is not None:
-        _check("change to detect [rad]", goal.change_rad, 0.0, 1.0)
+        _check("change_rad", "change to detect [rad]", goal.change_rad, 0.0, 1.0)
     if isinstance(goal.baseline_runs, bool) or not isinstance(goal.baseline_runs, int):
         raise PlanError(f"baseline runs must be a whole number, got {goal.baseline_runs!r}")
-    _check("baseline runs", goal.baseline_runs, 0, 10**6)
+    _check("baseline_runs", "baseline runs", goal.baseline_runs, 0, 10**6)
 
 
 def plan_test(sensor, limits, goal, efficiency=ESTIMATOR_EFFICIENCY):

@@ -267,7 +267,21 @@ PLAN_ARGS = ["plan", "--max-feed-mm-min", "30000", "--max-accel-m-s2", "5", "--t
         (["--noise-ug", "-3"], "noise_density_ug_rthz > 0, got -3 ug/sqrt(Hz)"),
         (["--noise-ug", "25", "-o", "{tmp}/nodir/plan.toml"], "nodir' does not exist"),
         (["--noise-ug", "25", "-o", "{tmp}"], "is a directory"),
-        (["--noise-ug", "25", "--confidence", "1"], "confidence must be in (0, 1), got 1.0"),
+        (["--noise-ug", "25", "--confidence", "1"], ": --confidence must be in (0, 1), got 1\n"),
+        # each limit named by its flag, in the flag's unit
+        (
+            ["--noise-ug", "25", "--travel-mm", "5"],
+            "--travel-mm must be in [10, 10000] mm, got 5 mm",
+        ),
+        (
+            ["--noise-ug", "25", "--servo-lags-ms", "2", "2000"],
+            "--servo-lags-ms must be in [0, 1000] ms, got 2000 ms",
+        ),
+        (
+            ["--noise-ug", "25", "--eps-c-deg", "50"],
+            "--eps-c-deg (or the --sensor file's value) must be in [0, 45] deg, got 50 deg",
+        ),
+        (["--noise-ug", "25", "--detect-um-m", "-3"], "--detect-um-m must be in (0, 1e+06] µm/m"),
     ],
 )
 def test_cli_refusals_are_one_line_before_any_plan(tmp_path, capsys, extra, message):

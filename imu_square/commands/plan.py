@@ -131,7 +131,7 @@ def _sensor(args):
 def run(args):
     """Plan, print the plan, write the program file and the JSON."""
     from imu_square.errors import ProgramError
-    from imu_square.planner import Goal, Limits, plan_test
+    from imu_square.planner import Goal, Limits, PlanInputError, plan_test
     from imu_square.units import MM, MM_PER_MIN, MS, URAD
 
     if args.output:  # refuse a bad path before planning, not after printing the plan
@@ -157,7 +157,10 @@ def run(args):
         separate_gravity=args.separate_gravity,
         stable_servo=args.stable_servo,
     )
-    plan = plan_test(sensor, limits, goal)
+    try:
+        plan = plan_test(sensor, limits, goal)
+    except PlanInputError as exc:
+        raise _in_flag_units(exc) from None
     print(plan.summary(), file=sys.stderr)
     if args.output:
         out = Path(args.output)
@@ -169,3 +172,36 @@ def run(args):
     if args.json:
         print(json.dumps(plan.to_json_dict()), file=sys.stdout, flush=True)
     return 0 if plan.detects is not False else 1
+
+
+def _in_flag_units(exc):
+    """The planner's refusal of a value, restated with the option and the unit it came in."""
+    from imu_square.planner import PlanError, interval
+    from imu_square.units import MM, MM_PER_MIN, MS, UG, URAD, G
+
+    flag, unit, scale = {
+        "noise_density_m_s2_rthz": ("--noise-density-ug", "ug/sqrt(Hz)", UG),
+        "flicker_corner_hz": ("--flicker-corner-hz", "Hz", 1.0),
+        "range_m_s2": ("--range-g", "g", G),
+        "sample_rate_hz": ("--sample-rate-hz", "Hz", 1.0),
+        "resolution_m_s2": ("--resolution-ug", "ug", UG),
+        "max_feed_m_s": ("--max-feed-mm-min", "mm/min", MM_PER_MIN),
+        "max_accel_m_s2": ("--max-accel-m-s2", "m/s^2", 1.0),
+        "travel_m": ("--travel-mm", "mm", MM),
+        "time_s": ("--time-s", "s", 1.0),
+        "servo_lags_s": ("--servo-lags-ms", "ms", MS),
+        "eps_c_rad": ("--eps-c-deg", "deg", math.radians(1.0)),
+        "ramp_s": ("--ramp-s", "s", 1.0),
+        "confidence": ("--confidence", "", 1.0),
+        "change_rad": ("--detect-um-m", "µm/m", URAD),
+        "baseline_runs": ("--baseline-runs", "", 1.0),
+    }[exc.parameter]
+    lo, hi = (b / scale for b in exc.bounds)
+    got = exc.value / scale
+    from_file = ("noise_density_m_s2_rthz", "flicker_corner_hz", "range_m_s2", "sample_rate_hz")
+    from_file += ("resolution_m_s2", "eps_c_rad")
+    where = " (or the --sensor file's value)" if exc.parameter in from_file else ""
+    unit = f" {unit}" if unit else ""
+    return PlanError(
+        f"{flag}{where} must be in {interval((lo, hi), exc.closed)}{unit}, got {got:.6g}{unit}"
+    )
