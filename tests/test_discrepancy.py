@@ -320,6 +320,15 @@ def test_a_bad_output_is_one_line_before_the_work_and_damages_nothing(
     assert "noise floor" not in err  # refused before the fit, not after it
 
 
+def test_a_run_that_fails_leaves_no_model_folder_behind(tmp_path, capsys):
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file")
+    model = tmp_path / "new" / "model"
+    code, out, err = run_cli(capsys, bad, "--model-out", model)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert not (tmp_path / "new").exists()
+
+
 def test_analyze_refuses_a_plot_in_a_missing_folder_before_the_work(tmp_path, capsys):
     path, _ = record(tmp_path, seed=7)
     code = main(["analyze", str(path), "--plot", str(tmp_path / "nodir" / "a.png")])

@@ -66,10 +66,10 @@ def run(args):
         from imu_square.io.output import check_plot_path
 
         check_plot_path(args.plot)
-    if args.model_out:
-        from imu_square.monitor.outputs import ensure_folder
+    if args.model_out:  # checked now, made only when the fit has something to write
+        from imu_square.io.output import check_folder_path
 
-        ensure_folder(args.model_out, "model")
+        check_folder_path(args.model_out, "model")
     recording = read_mcap(args.recording)
     prog = program or recording.program
     if prog is not None and prog.n_feeds > 1:  # else a message about a Python property

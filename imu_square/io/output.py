@@ -62,6 +62,45 @@ def check_output_path(path, *, overwrite=False):
     return path
 
 
+def check_folder_path(folder, what):
+    """Refuse a folder that cannot be made or written, without making it: before any work.
+
+    The folder is created only when its files are written, so that a run
+    that fails leaves no empty folder behind.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The folder to be written into; it need not exist.
+    what : str
+        What goes there, for the message (e.g. ``"model"``).
+
+    Returns
+    -------
+    Path
+        ``folder`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputError
+        Naming the folder and what is wrong with it.
+    """
+    folder = Path(folder)
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"{folder}: cannot create the {what} folder: {str(existing)!r} is a file")
+    try:  # as in check_output_path: the one sure test (permissions, read-only mounts)
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".imu-square-probe-"):
+            pass
+    except OSError as exc:
+        raise OutputError(
+            f"{folder}: cannot create the {what} folder in {str(existing)!r}: {exc.strerror or exc}"
+        ) from None
+    return folder
+
+
 def check_free_space(path, needed_bytes, what):
     """Refuse to start writing ``path`` when its disk cannot hold ``needed_bytes``.
 
