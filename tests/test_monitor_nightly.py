@@ -9,6 +9,7 @@ copied into each test.
 
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -260,3 +261,49 @@ def test_bad_inputs_found_by_review_are_one_line_and_store_nothing(rig, capsys):
     finally:
         os.chdir(cwd)
     assert record["recording"] == str(Path(good[1]).resolve())
+
+
+TWO_FEEDS = {
+    "radius_mm": 25.0,
+    "feeds_mm_per_min": [9000.0, 4500.0],
+    "cycles_per_direction": [3, 2],
+    "dwell_s": 0.5,
+}
+
+
+def test_a_two_feed_program_is_refused_before_the_machine_runs(rig, capsys):
+    # the monitor tracks one feed's theta_y - theta_x: a two-feed program's night would be
+    # recorded (the machine run, the warm-up spent) only to be refused at the analysis
+    (rig / "two.toml").write_text(program_from_mapping(TWO_FEEDS).to_toml())
+    program_line = re.compile(r'(?m)^file = ".*"$')
+    text = program_line.sub(f'file = "{rig / "two.toml"}"', (rig / "monitor.toml").read_text())
+    (rig / "two-feed.toml").write_text(text)
+    with open_history(rig / "history.db") as h:
+        before = len(h.runs("m1"))
+    config = str(rig / "two-feed.toml")
+    for argv in (
+        ["nightly", "--config", config],
+        ["nightly", "--config", config, "--check"],
+        ["baseline", "set", "--config", config, "--last", "3"],
+        ["replay", "--config", config, str(night(rig, 30))],
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        assert "two.toml runs 2 feeds (9000, 4500 mm/min)" in err[0]
+        assert "analyze --separate-gravity" in err[0] and "period_s" not in err[0]
+    assert not list(rig.glob("data/*.mcap"))  # the machine never ran
+    with open_history(rig / "history.db") as h:
+        assert len(h.runs("m1")) == before
+
+
+def test_a_two_feed_recording_is_an_invalid_night_named_as_such(rig, capsys):
+    text = re.sub(r'(?m)^file = ".*"$', 'file = ""', (rig / "monitor.toml").read_text())
+    (rig / "paper.toml").write_text(text)
+    when = int((START + timedelta(days=6)).timestamp() * 1e9)
+    rec, _ = simulate_run(program_from_mapping(TWO_FEEDS), sensor=SENSOR, seed=8, t0_ns=when)
+    path = rig / "two-feed.mcap"
+    write_mcap(rec, path)
+    code, record = judge(rig / "paper.toml", path, capsys)
+    assert code == EXIT_CODES["invalid"] and record["state"] == "invalid"
+    assert record["invalid_reason"].startswith("the recording runs 2 feeds (9000, 4500 mm/min)")

@@ -253,7 +253,7 @@ def run_monitor(args, config=None):
             f"sensor is and which program runs"
         )
     config = config or read_monitor(args.config)
-    program = read_program(config.program or data_path("program_paper.toml"))
+    program = config.test_program() or read_program(data_path("program_paper.toml"))
     out = Path(args.out) if args.out else config.output_dir()
     _check_night(config, out, not args.recording)  # before the machine runs or anything is stored
     if args.recording and not Path(args.recording).is_file():

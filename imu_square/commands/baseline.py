@@ -113,12 +113,11 @@ def run_set(args):
     """Set a baseline from the runs given, design its alarms, print it."""
     from imu_square.monitor.night import stored_design
     from imu_square.monitor.setup import runs_for_baseline, set_baseline
-    from imu_square.program import read_program
 
     if bool(args.runs) == (args.last is not None):
         raise ImuSquareError("give the baseline's runs (RUN...) or --last N, one of the two")
     with monitor_session(args.config) as (config, history):
-        program = read_program(config.program) if config.program else None
+        program = config.test_program()
         if args.last is not None:
             valid = history.runs(config.machine_id, valid_only=True)
             if args.last < 1 or args.last > len(valid):

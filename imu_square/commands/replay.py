@@ -122,7 +122,6 @@ def run(args):
         store_outcome,
     )
     from imu_square.monitor.store import open_history
-    from imu_square.program import read_program
 
     config = read_monitor(args.config)
     if args.jobs is not None and args.jobs < 1:
@@ -132,7 +131,7 @@ def run(args):
     if args.into:
         config = replace(config, history=args.into)
     paths = expand_paths(args.paths)
-    program = read_program(config.program) if config.program else None
+    program = config.test_program()
     job = ReplayJob(config.machine_id, config.analysis, program)
     if args.dry_run:
         print(

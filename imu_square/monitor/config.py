@@ -200,6 +200,36 @@ class MonitorConfig:
     alerts: AlertsConfig = field(default_factory=AlertsConfig)
     metrics: MetricsConfig | None = None
 
+    def test_program(self):
+        """The program the monitor expects, read from :attr:`program`; None for the paper's test.
+
+        Returns
+        -------
+        TestProgram or None
+
+        Raises
+        ------
+        MonitorConfigError
+            The program runs several feeds: the monitor tracks one feed's
+            ``theta_y - theta_x`` night to night, and a night of a two-feed
+            program would be recorded only to be refused.
+        """
+        if self.program is None:
+            return None
+        from imu_square.program import read_program
+        from imu_square.units import MM_PER_MIN
+
+        program = read_program(self.program)
+        if program.n_feeds > 1:
+            feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in program.feeds)
+            raise MonitorConfigError(
+                f"{self.path}: [program] file {self.program} runs {program.n_feeds} feeds "
+                f"({feeds} mm/min); the monitor judges a one-feed test night to night: give "
+                "it a one-feed program (imu-square plan without --separate-gravity), and "
+                "analyse two-feed runs with 'imu-square analyze --separate-gravity'"
+            )
+        return program
+
     def history_location(self):
         """The history as :func:`~imu_square.monitor.store.open_history` takes it."""
         from imu_square.monitor.store import default_history_path

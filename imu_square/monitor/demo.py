@@ -171,12 +171,11 @@ def seed_history(config, history, now=None, progress=None):
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.night import analyse_recording, judge_recording, run_row
     from imu_square.monitor.setup import set_baseline
-    from imu_square.program import read_program
     from imu_square.simulate import read_sensor, simulate_run
     from imu_square.simulate.machine import machine_from_mapping
 
     say = progress or (lambda text: None)
-    program = read_program(config.program)
+    program = config.test_program()
     sensor = read_sensor(config.emulated.sensor)
     folder = config.output_dir() / "seed"
     folder.mkdir(parents=True, exist_ok=True)

@@ -19,7 +19,7 @@ from imu_square.monitor.drift import fit_night_drift, power_on_offset_s
 from imu_square.monitor.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.evaluate import assess, design_for, iso, verdict
 from imu_square.monitor.rows import EvaluationRow, RunRow
-from imu_square.units import URAD
+from imu_square.units import MM_PER_MIN, URAD
 
 
 @dataclass(frozen=True)
@@ -179,6 +179,15 @@ def analyse_recording(config, path, program=None, complete=True):
         return recording, None, first_line(cut[0])
     if not complete:
         return recording, None, "the recorder reported an incomplete recording"
+    runs = recording.program
+    if runs is not None and runs.n_feeds > 1:
+        feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in runs.feeds)
+        return (
+            recording,
+            None,
+            f"the recording runs {runs.n_feeds} feeds ({feeds} mm/min): the monitor judges a "
+            "one-feed test (analyse it with 'imu-square analyze --separate-gravity')",
+        )
     if program is not None and recording.program is not None and recording.program != program:
         return (
             recording,
