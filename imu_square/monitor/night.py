@@ -179,13 +179,13 @@ def analyse_recording(config, path, program=None, complete=True):
         return recording, None, first_line(cut[0])
     if not complete:
         return recording, None, "the recorder reported an incomplete recording"
-    runs = recording.program
-    if runs is not None and runs.n_feeds > 1:
-        feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in runs.feeds)
+    recorded = recording.program
+    if recorded is not None and recorded.n_feeds > 1:
+        feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in recorded.feeds)
         return (
             recording,
             None,
-            f"the recording runs {runs.n_feeds} feeds ({feeds} mm/min): the monitor judges a "
+            f"the recording runs {recorded.n_feeds} feeds ({feeds} mm/min): the monitor judges a "
             "one-feed test (analyse it with 'imu-square analyze --separate-gravity')",
         )
     if program is not None and recording.program is not None and recording.program != program:
