@@ -57,6 +57,8 @@ def make_recordings(folder, n):
 def replay(paths, history, engine, jobs):
     """Replay into a fresh history; wall time and the workers' own per-file seconds."""
     job = ReplayJob("bench", AnalysisSettings())
+    for stale in history.parent.glob(history.name + "*"):  # a kept folder's last run (and -wal)
+        stale.unlink()
     start = time.perf_counter()
     per_file = []
     with open_history(history) as h:
