@@ -26,8 +26,9 @@ bound for the paper's 0.16 Hz circle and a 0.5 Hz corner.
   noise that the averaged cycle it is compared with holds (1 % for 15 cycles
   at the default cutoff, 5 % for 3);
 - the 1/f corner from its Welch spectrum below half the cutoff, by a Whittle
-  fit of ``a + b / f``, kept only where ``b`` exceeds three times its standard
-  error (a white sensor then gets exactly the white bound).
+  fit of ``a + b / f``, kept only where ``b`` exceeds four times its standard
+  error, which counts the Welch bins' correlation (a white sensor then gets
+  exactly the white bound, but in about 1 run in 5000).
 """
 
 import functools
@@ -45,10 +46,11 @@ _MAD_TO_SD = 1.4826
 # Welch segments span this many circle periods (resolution a quarter of the circle
 # frequency); shorter stretches give no 1/f estimate below one period.
 _SEGMENT_PERIODS = 4
-# The 1/f term counts when it exceeds this many standard errors: white noise then
-# reads as 1/f in about 1 run in 10^4 (at 3, 1 in 300: the residual's z spreads 1.1,
-# the averaged cycle's notches at the harmonics), while the paper's 1/f test (z ~6.5)
-# still finds its corner.
+# The 1/f term counts when it exceeds this many standard errors. On white noise
+# b / se(b) spreads with sd 1.03, and 1.10-1.15 on a run's residual (taking out the
+# averaged cycle adds some): at 4, about 1 white run in 5000 reads as 1/f (at 3,
+# 1 in 300: 2 of the 200 high-accel runs), while the paper's 1/f test (z 5-7.5)
+# keeps its corner.
 _FLICKER_SIGNIFICANCE = 4.0
 
 
@@ -212,20 +214,20 @@ class FlickerFit:
     ----------
     white_psd : float
         ``a``, the one-sided white PSD. [(m/s^2)^2/Hz]
-    flicker_psd_hz : float
+    flicker_coefficient : float
         ``b``: the 1/f part is ``b / f``. [(m/s^2)^2]
-    se_flicker_psd_hz : float
+    se_flicker_coefficient : float
         Standard error of ``b``, for the Welch bins' correlation. [(m/s^2)^2]
     """
 
     white_psd: float
-    flicker_psd_hz: float
-    se_flicker_psd_hz: float
+    flicker_coefficient: float
+    se_flicker_coefficient: float
 
     @property
     def z(self):
         """``b`` in standard errors: about standard normal for white noise."""
-        return self.flicker_psd_hz / self.se_flicker_psd_hz
+        return self.flicker_coefficient / self.se_flicker_coefficient
 
 
 def flicker_fit(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz):
@@ -280,7 +282,7 @@ def flicker_fit(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz
     model = np.maximum(design @ coef, 1e-6 * abs(coef[0]))
     # Sandwich covariance: the Welch bins are not independent (adjacent Hann bins
     # correlate by 4/9, overlapping segments by 1/36). Taken as independent, the
-    # se of b was 0.7 of its spread, and white runs read as 1/f at "3 se".
+    # se of b was 0.7 of its spread, and 1 white run in 100 read as 1/f at "3 se".
     scaled = design / model[:, None]
     bread = np.linalg.inv(scaled.T @ scaled)
     # Over all series: n_avg segments at lag 0, 2 (n_avg - n_series) pairs at N / 2.
@@ -315,7 +317,7 @@ def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency
         return float("nan")
     if fit.white_psd <= 0 or fit.z < _FLICKER_SIGNIFICANCE:
         return 0.0
-    return fit.flicker_psd_hz / fit.white_psd
+    return fit.flicker_coefficient / fit.white_psd
 
 
 @functools.lru_cache(maxsize=16)
