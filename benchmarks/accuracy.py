@@ -194,6 +194,7 @@ def _stats(rows, case, level):
     servo = np.array([r[level]["servo_mismatch_rad"] for r in ok])
     servo_true = np.array([r["truth"]["servo_mismatch_rad"] for r in ok])
     typea = np.array([r[level]["u_squareness_rad"] for r in ok])
+    over_white = np.array([r[level]["crb_rad"] / r[level]["crb_white_rad"] for r in ok])
     stats = {
         "n": len(ok),
         "failed": failed,
@@ -206,6 +207,8 @@ def _stats(rows, case, level):
         "crb_urad": crb * 1e6,
         "sd_over_crb": float(np.std(err, ddof=1) / crb) if len(ok) > 1 else None,
         "sd_over_crb_white": float(np.std(err, ddof=1) / crb_white) if len(ok) > 1 else None,
+        "flicker_found": float(np.mean(over_white > 1)),
+        "crb_over_white_range": [float(over_white.min()), float(over_white.max())],
         "mean_type_a_over_sd": float(np.mean(typea) / np.std(err, ddof=1)) if len(ok) > 1 else None,
         "eps_c_bias_deg": float(np.degrees(np.mean(eps_err))),
         "eps_c_max_abs_err_deg": float(np.degrees(np.max(np.abs(eps_err)))),
@@ -737,6 +740,14 @@ def cases_and_filters(seeds, program, pool, quick):
             f"{low['eps_c_within_2u']:6.2f} "
             f"{'' if servo is None else f'{servo:7.2%}':>7s} {low['failed'] + paper['failed']:4d}"
         )
+    for case in CASES:
+        paper = table[case]["paper_noise"]
+        if paper["n"] and paper["flicker_found"] > 0:
+            lo, hi = paper["crb_over_white_range"]
+            print(
+                f"  {case}: 1/f found in {paper['flicker_found']:.1%} of runs at 7 ug, "
+                f"CRB / white CRB {lo:.2f}-{hi:.2f}"
+            )
     print(
         "(bias against the exact measurand S at 1e-6 m/s^2/rtHz in urad; S-(a+b): the exact "
         "measurand minus alpha + beta; CRB at the noise at the circle frequency, CRBw for the "
