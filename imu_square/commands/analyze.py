@@ -54,6 +54,9 @@ def register(sub):
 
 def run(args):
     """Analyse each recording; return 2 if any could not be analysed."""
+    from imu_square.allocator import tune_allocator
+
+    tune_allocator()  # this process analyses files: keep freed memory for the next array
     from imu_square.errors import AnalysisError
     from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.convergence import convergence
