@@ -30,6 +30,7 @@ import numpy as np
 
 from imu_square.errors import AnalysisError
 from imu_square.pipeline.order_stats import column_medians, median, quantile
+from imu_square.pipeline.trig import cos_sin
 
 # Motion intervals closer than this fraction of a period are one interval.
 _MERGE_PERIODS = 0.1
@@ -255,8 +256,7 @@ def _phase_slope(u, dev, omega):
     np.divide(u, half, out=basis[1])
     c, s, c2, s2 = basis[2], basis[3], basis[4], basis[5]
     np.multiply(omega, u, out=c2)
-    np.cos(c2, out=c)
-    np.sin(c2, out=s)
+    cos_sin(c2, out=(c, s))  # to a few ulps of np.cos, np.sin; four times faster
     np.multiply(s, s, out=s2)
     np.multiply(c, c, out=c2)
     c2 -= s2
