@@ -396,6 +396,9 @@ def reference_paths(monkeypatch):
         monkeypatch.setattr(segment, "median", lambda a: float(np.median(a)))
         monkeypatch.setattr(segment, "column_medians", lambda a: np.median(a, axis=0))
         monkeypatch.setattr(segment, "cos_sin", _numpy_cos_sin_into)
+        monkeypatch.setattr(
+            segment, "_minus_row", lambda a, r, out=None: np.subtract(a, r, out=out)
+        )
         monkeypatch.setattr(noise, "white_density", _white_density_reference)
         monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
         monkeypatch.setattr(
@@ -572,3 +575,15 @@ def test_table_cosine_changes_nothing_the_data_can_tell(seed, monkeypatch):
     assert fast.u_squareness_rad == pytest.approx(ref.u_squareness_rad, rel=1e-9)
     assert fast.crb_rad == pytest.approx(ref.crb_rad, rel=1e-9)
     assert fast.period_s == pytest.approx(ref.period_s, rel=1e-13)
+
+
+@given(
+    arrays(np.float64, st.tuples(st.integers(1, 50), st.integers(1, 3)), elements=floats),
+    st.data(),
+)
+def test_minus_row_column_by_column_is_bit_for_bit(a, data):
+    row = data.draw(arrays(np.float64, a.shape[1], elements=floats))
+    np.testing.assert_array_equal(segment._minus_row(a, row), a - row)
+    out = np.full(a.shape, np.nan)
+    assert segment._minus_row(a, row, out=out) is out
+    np.testing.assert_array_equal(out, a - row)

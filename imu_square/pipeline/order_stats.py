@@ -82,7 +82,8 @@ def row_medians(values, overwrite_input=False):
         part = np.partition(a, k, axis=-1)
     upper = part[..., k]
     mid = upper if a.shape[-1] % 2 else (part[..., :k].max(axis=-1) + upper) / 2
-    return np.where(np.isnan(part[..., k:]).any(axis=-1), np.nan, mid)
+    # NaN sorts last, and max propagates it: one reduction, no boolean temporary
+    return np.where(np.isnan(part[..., k:].max(axis=-1)), np.nan, mid)
 
 
 def quantile(values, q):
