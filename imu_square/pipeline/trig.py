@@ -66,8 +66,8 @@ def cos_sin(x_rad, out=None):
     c *= r2
     c += 1.0
     # cos x = Tc cos r - Ts sin r, sin x = Tc sin r + Ts cos r
-    table_c = np.take(_TABLE_COS, index, out=r2)
-    table_s = np.take(_TABLE_SIN, index)
+    table_c = np.take(_TABLE_COS, index, out=r2, mode="wrap")  # unbuffered, unlike "raise"
+    table_s = np.take(_TABLE_SIN, index, mode="wrap")
     ts_sin_r = np.multiply(table_s, s, out=index.view(np.float64))
     table_s *= c
     c *= table_c
