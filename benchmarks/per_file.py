@@ -15,9 +15,16 @@ the process's CPU time in total (less inflated by a loaded machine's waiting:
 the nearer to a quiet core); the two results are compared too (difference of
 ``theta_y - theta_x`` over the Cramér-Rao bound).
 
+``--allocator`` (default ``both``, one after the other): ``default`` runs both
+sides with glibc's malloc as it comes, the code alone; ``tuned`` runs both
+with the mmap and trim thresholds that :mod:`imu_square.allocator` sets in the
+processes that analyse files (32 MB, 128 MB), so the ratio is still the
+code's, and the total is what ``replay`` and ``analyze`` see.
+
 Usage::
 
     python benchmarks/per_file.py [--runs 21] [--baseline PATH] [--baseline-commit 28f8832]
+        [--allocator default|tuned|both]
 
 Writes ``benchmarks/results/per_file.json``.
 """
@@ -37,7 +44,10 @@ RESULTS = HERE / "results" / "per_file.json"
 STAGES = ("read", "filter", "segment", "cycles", "fits", "noise", "other", "total", "total_cpu")
 
 WORKER = r"""
-import json, sys, time
+import ctypes, json, os, sys, time
+if os.environ.get("PER_FILE_ALLOCATOR") == "tuned":  # as imu_square.allocator, on both sides
+    libc = ctypes.CDLL(None)
+    assert libc.mallopt(-3, 32 * 1024 * 1024) == 1 and libc.mallopt(-1, 128 * 1024 * 1024) == 1
 import imu_square.pipeline.squareness as sq
 from imu_square.io.mcap import read_mcap
 from imu_square.monitor.config import AnalysisSettings
@@ -99,8 +109,10 @@ def baseline_tree(commit):
     return path
 
 
-def start_worker(code_root, mcap):
+def start_worker(code_root, mcap, allocator):
     env = dict(os.environ, PYTHONPATH=str(code_root), OPENBLAS_NUM_THREADS="1")
+    env["PER_FILE_ALLOCATOR"] = allocator
+    env["IMU_SQUARE_MALLOC_TUNING"] = "0"  # the worker's own switch decides, on both sides
     env.setdefault("OMP_NUM_THREADS", "1")
     return subprocess.Popen(
         [sys.executable, "-c", WORKER, str(mcap)],
@@ -121,35 +133,32 @@ def ask(worker):
     return json.loads(line)
 
 
-def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--runs", type=int, default=21, help="timed runs per side (>= 15)")
-    parser.add_argument("--warmup", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--baseline", help="source tree of the old code (default: a worktree)")
-    parser.add_argument("--baseline-commit", default="28f8832")
-    args = parser.parse_args(argv)
-    old_root = Path(args.baseline) if args.baseline else baseline_tree(args.baseline_commit)
+ALLOCATOR_NOTE = {
+    "default": "glibc's defaults: the code alone",
+    "tuned": "glibc's mmap/trim thresholds raised as imu_square.allocator does",
+}
+
+
+def measure(old_root, mcap, allocator, args):
+    """Interleaved runs of both sides under one allocator setting; medians and differences."""
     load_before = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="imu-per-file-") as tmp:
-        mcap = Path(tmp) / "run.mcap"
-        duration, n = make_recording(mcap, args.seed)
-        size_mb = mcap.stat().st_size / 1e6
-        workers = {"old": start_worker(old_root, mcap), "new": start_worker(ROOT, mcap)}
-        try:
-            for _ in range(args.warmup):
-                for w in workers.values():
-                    ask(w)
-            runs = {"old": [], "new": []}
-            for i in range(args.runs):
-                order = ("old", "new") if i % 2 == 0 else ("new", "old")
-                for side in order:
-                    runs[side].append(ask(workers[side]))
-        finally:
+    workers = {
+        "old": start_worker(old_root, mcap, allocator),
+        "new": start_worker(ROOT, mcap, allocator),
+    }
+    try:
+        for _ in range(args.warmup):
             for w in workers.values():
-                w.stdin.close()
-                w.wait(timeout=30)
-    load_after = os.getloadavg()
+                ask(w)
+        runs = {"old": [], "new": []}
+        for i in range(args.runs):
+            order = ("old", "new") if i % 2 == 0 else ("new", "old")
+            for side in order:
+                runs[side].append(ask(workers[side]))
+    finally:
+        for w in workers.values():
+            w.stdin.close()
+            w.wait(timeout=30)
     medians = {
         side: {s: statistics.median(r["times"].get(s, 0.0) for r in runs[side]) for s in STAGES}
         for side in runs
@@ -159,12 +168,9 @@ def main(argv=None):
         for a, b in zip(runs["old"], runs["new"], strict=True)
     ]
     old, new = runs["old"][-1], runs["new"][-1]
-    result = {
-        "recording": {"duration_s": duration, "samples": n, "mb": size_mb, "seed": args.seed},
-        "baseline": str(old_root),
-        "runs": args.runs,
+    return {
         "load_before": load_before,
-        "load_after": load_after,
+        "load_after": os.getloadavg(),
         "median_s": medians,
         "ratio_new_over_old": {
             s: medians["new"][s] / medians["old"][s] if medians["old"][s] else None for s in STAGES
@@ -176,22 +182,65 @@ def main(argv=None):
             "u_squareness_rel": new["u_squareness_rad"] / old["u_squareness_rad"] - 1,
             "u_bootstrap_rel": new["u_bootstrap_rad"] / old["u_bootstrap_rad"] - 1,
             "period_rel": new["period_s"] / old["period_s"] - 1,
+            "crb_rel": new["crb_rad"] / old["crb_rad"] - 1,
         },
     }
-    print(
-        f"{duration:.0f} s at {n / duration:.0f} Hz, {args.runs} interleaved runs per side, "
-        f"load {load_before[0]:.2f} -> {load_after[0]:.2f} (1-min average, 2 cores)"
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=21, help="timed runs per side (>= 15)")
+    parser.add_argument("--warmup", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--baseline", help="source tree of the old code (default: a worktree)")
+    parser.add_argument("--baseline-commit", default="28f8832")
+    parser.add_argument(
+        "--allocator",
+        choices=("default", "tuned", "both"),
+        default="both",
+        help="glibc's defaults (the code alone), the thresholds imu_square.allocator sets in "
+        "the processes that analyse files, or both in turn (default); each on both sides",
     )
-    print(f"{'stage':10s} {'old [ms]':>10s} {'new [ms]':>10s} {'new/old':>8s}")
-    for s in STAGES:
-        o, w = 1e3 * medians["old"][s], 1e3 * medians["new"][s]
-        print(f"{s:10s} {o:10.1f} {w:10.1f} {w / o if o else float('nan'):8.2f}")
-    print(f"median over pairs of total new/old: {result['ratio_total_median_of_pairs']:.2f}")
-    d = result["difference"]
-    print(
-        f"results: squareness differs by {d['squareness_over_crb']:.1e} CRB, eps_c by "
-        f"{d['eps_c_rad']:.1e} rad, u by {d['u_squareness_rel']:.1e} (relative)"
-    )
+    args = parser.parse_args(argv)
+    old_root = Path(args.baseline) if args.baseline else baseline_tree(args.baseline_commit)
+    modes = ("default", "tuned") if args.allocator == "both" else (args.allocator,)
+    result = {"baseline": str(old_root), "runs": args.runs, "allocators": {}}
+    with tempfile.TemporaryDirectory(prefix="imu-per-file-") as tmp:
+        mcap = Path(tmp) / "run.mcap"
+        duration, n = make_recording(mcap, args.seed)
+        size_mb = mcap.stat().st_size / 1e6
+        result["recording"] = {"duration_s": duration, "samples": n, "mb": size_mb}
+        result["recording"]["seed"] = args.seed
+        for mode in modes:
+            result["allocators"][mode] = measure(old_root, mcap, mode, args)
+    for mode in modes:
+        r = result["allocators"][mode]
+        load_before, load_after = r["load_before"], r["load_after"]
+        print(
+            f"\nallocator {mode} ({ALLOCATOR_NOTE[mode]}), both sides alike: "
+            f"{duration:.0f} s at {n / duration:.0f} Hz, {args.runs} interleaved runs per side, "
+            f"load {load_before[0]:.2f} -> {load_after[0]:.2f} (1-min average, 2 cores)"
+        )
+        medians = r["median_s"]
+        print(f"{'stage':10s} {'old [ms]':>10s} {'new [ms]':>10s} {'new/old':>8s}")
+        for s in STAGES:
+            o, w = 1e3 * medians["old"][s], 1e3 * medians["new"][s]
+            print(f"{s:10s} {o:10.1f} {w:10.1f} {w / o if o else float('nan'):8.2f}")
+        print(f"median over pairs of total new/old: {r['ratio_total_median_of_pairs']:.2f}")
+        d = r["difference"]
+        print(
+            f"results: squareness differs by {d['squareness_over_crb']:.1e} CRB, eps_c by "
+            f"{d['eps_c_rad']:.1e} rad, u by {d['u_squareness_rel']:.1e} (relative), "
+            f"CRB by {d['crb_rel']:.1e} (relative)"
+        )
+    if len(modes) == 2:
+        code = result["allocators"]["default"]["median_s"]
+        tuned = result["allocators"]["tuned"]["median_s"]
+        print(
+            f"\ntotal [ms]: old {1e3 * code['old']['total']:.1f} -> new "
+            f"{1e3 * code['new']['total']:.1f} (code alone), new with the tuned allocator "
+            f"{1e3 * tuned['new']['total']:.1f} (old with it {1e3 * tuned['old']['total']:.1f})"
+        )
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=1))
     print(f"wrote {RESULTS}")

@@ -28,6 +28,7 @@ from imu_square.pipeline import (
     quality,
     segment,
     squareness,
+    trig,
 )
 from imu_square.pipeline import filter as filter_module
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
@@ -141,10 +142,14 @@ def test_phase_fit_matches_lstsq(omega, periods, ellipse, noise, gap, seed):
     assert fast == pytest.approx(ref, rel=1e-9, abs=1e-12)
 
 
-def _phase_slope_basis_reference(u, dev, omega):
+def _numpy_cos_sin(x):
+    return np.cos(x), np.sin(x)
+
+
+def _phase_slope_basis_reference(u, dev, omega, cos_sin=_numpy_cos_sin):
     """segment._phase_slope's normal equations with the basis stacked from temporaries."""
     half = max(abs(u[0]), abs(u[-1]), np.finfo(float).tiny)
-    c, s = np.cos(omega * u), np.sin(omega * u)
+    c, s = cos_sin(omega * u)
     basis = np.stack([np.ones_like(u), u / half, c, s, c * c - s * s, 2 * c * s])
     return float(np.linalg.solve(basis @ basis.T, basis @ dev)[1] / half)
 
@@ -160,7 +165,40 @@ def test_phase_slope_basis_in_place_is_bit_for_bit(omega, periods, seed):
     u = np.arange(0.0, periods * 2 * np.pi / abs(omega), 1e-3)
     u -= 0.5 * u[-1]
     dev = 0.01 * u + 0.02 * np.sin(2 * omega * u) + 0.1 * rng.standard_normal(u.size)
-    assert segment._phase_slope(u, dev, omega) == _phase_slope_basis_reference(u, dev, omega)
+    fast = segment._phase_slope(u, dev, omega)
+    assert fast == _phase_slope_basis_reference(u, dev, omega, trig.cos_sin)
+    # with numpy's cosine and sine (a few ulps away): the same slope to 1e-12 of the
+    # 0.01 rad/s put in, a billionth of what 0.1 rad of noise lets the fit tell
+    assert fast == pytest.approx(_phase_slope_basis_reference(u, dev, omega), abs=1e-14)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    arrays(
+        np.float64,
+        st.integers(1, 3000),
+        elements=st.floats(-1e4, 1e4) | st.sampled_from([0.0, -0.0, np.pi, -np.pi / 2]),
+    )
+)
+def test_cos_sin_is_numpys_to_a_few_ulps(x):
+    # an ulp of each table entry and of the sums, and an ulp of fl(2 pi) per whole turn
+    c, s = trig.cos_sin(x)
+    bound = 1e-15 + 2.5e-16 * np.abs(x) / (2 * np.pi)
+    assert np.all(np.abs(c - np.cos(x)) <= bound)
+    assert np.all(np.abs(s - np.sin(x)) <= bound)
+    c2, s2 = np.empty_like(x), np.empty_like(x)
+    out = trig.cos_sin(x, out=(c2, s2))
+    assert out[0] is c2 and out[1] is s2
+    np.testing.assert_array_equal(c2, c)
+    np.testing.assert_array_equal(s2, s)
+
+
+def test_cos_sin_is_at_most_three_ulps_off_over_a_run_of_phases():
+    # a 200 s run's phases, reduced to [0, 2 pi) as the noise model does
+    x = np.random.default_rng(0).uniform(0.0, 2 * np.pi, 200_000)
+    c, s = trig.cos_sin(x)
+    assert np.max(np.abs(c - np.cos(x))) <= 3 * np.finfo(float).eps
+    assert np.max(np.abs(s - np.sin(x))) <= 3 * np.finfo(float).eps
 
 
 def _tukey_weights_reference(norm, z):
@@ -309,6 +347,40 @@ def test_model_residual_is_the_reference_to_round_off(name, monkeypatch):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
+def _numpy_cos_sin_into(x, out):
+    return np.cos(x, out=out[0]), np.sin(x, out=out[1])
+
+
+def _white_density_reference(residuals, sample_rate_hz):
+    """noise.white_density before (commit e1a42b2), with numpy's medians."""
+    r = np.concatenate(residuals, axis=0)
+    sd = noise._MAD_TO_SD * np.median(np.abs(r - np.median(r, axis=0)), axis=0)
+    return float(np.sqrt(np.mean(sd**2) / (sample_rate_hz / 2)))
+
+
+@pytest.mark.parametrize("name", ["servo", "short_gaps"])
+def test_white_density_in_place_is_bit_for_bit(name, monkeypatch):
+    seen = []
+    original = noise.model_residual
+    monkeypatch.setattr(noise, "model_residual", lambda *a: seen.append(original(*a)) or seen[-1])
+    analyze(_case(name), OPTIONS)
+    residuals = seen[0]
+    assert len(residuals) > (1 if name == "short_gaps" else 0)
+    kept = [r.copy() for r in residuals]
+    fast = noise.white_density(residuals, 1000.0)
+    assert fast == _white_density_reference(residuals, 1000.0)
+    for a, b in zip(residuals, kept, strict=True):  # the caller's residuals untouched
+        np.testing.assert_array_equal(a, b)
+
+
+@given(rows)
+def test_row_medians_overwriting_the_input_are_numpys_bit_for_bit(a):
+    expected = np.median(a, axis=-1)
+    mine = a.copy()
+    np.testing.assert_array_equal(order_stats.row_medians(mine, overwrite_input=True), expected)
+    np.testing.assert_array_equal(np.sort(mine, axis=-1), np.sort(a, axis=-1))  # reordered
+
+
 @pytest.fixture
 def reference_paths(monkeypatch):
     """Swap every fast path for the library call it replaces."""
@@ -321,12 +393,17 @@ def reference_paths(monkeypatch):
         monkeypatch.setattr(noise, "_periodogram_sum", _periodogram_sum_reference)
         monkeypatch.setattr(noise, "model_residual", _model_residual_reference)
         monkeypatch.setattr(filter_module, "lowpass", _lowpass_reference)
-        for module in (segment, noise):
-            if hasattr(module, "median"):
-                monkeypatch.setattr(module, "median", lambda a: float(np.median(a)))
-            monkeypatch.setattr(module, "column_medians", lambda a: np.median(a, axis=0))
+        monkeypatch.setattr(segment, "median", lambda a: float(np.median(a)))
+        monkeypatch.setattr(segment, "column_medians", lambda a: np.median(a, axis=0))
+        monkeypatch.setattr(segment, "cos_sin", _numpy_cos_sin_into)
+        monkeypatch.setattr(
+            segment, "_minus_row", lambda a, r, out=None: np.subtract(a, r, out=out)
+        )
+        monkeypatch.setattr(noise, "white_density", _white_density_reference)
         monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
-        monkeypatch.setattr(fit, "row_medians", lambda a: np.median(a, axis=-1))
+        monkeypatch.setattr(
+            fit, "row_medians", lambda a, overwrite_input=False: np.median(a, axis=-1)
+        )
         monkeypatch.setattr(fit, "_psi_and_deriv", lambda m, z: (m.psi(z), m.psi_deriv(z)))
         monkeypatch.setattr(fit, "_weights", lambda m, z, overwrite=False: m.weights(z))
         monkeypatch.setattr(
@@ -481,3 +558,32 @@ def test_rotation_in_place_is_bit_for_bit(omega, periods, noise, seed):
     rel = np.column_stack([np.cos(phi), np.sin(phi)]) + noise * rng.standard_normal((t.size, 2))
     period = 2 * np.pi / abs(omega)
     assert segment._rotation(t, rel, period) == _rotation_with_temporaries(t, rel, period)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_table_cosine_changes_nothing_the_data_can_tell(seed, monkeypatch):
+    # trig.cos_sin (a few ulps off numpy's) in the phase fit and the noise model, against
+    # numpy's cosine and sine, over seeds: a billionth of the Cramer-Rao bound at most
+    sensor = SensorModel(noise_density_m_s2_rthz=100 * UG, flicker_corner_hz=0.5, eps_c_rad=0.1)
+    rec = simulate_run(SHORT, *with_effects(["servo_mismatch"], sensor=sensor), seed=100 + seed)[0]
+    fast = analyze(rec, OPTIONS)
+    monkeypatch.setattr(segment, "cos_sin", _numpy_cos_sin_into)
+    monkeypatch.setattr(noise, "cos_sin", _numpy_cos_sin_into)
+    ref = analyze(rec, OPTIONS)
+    assert abs(fast.squareness_rad - ref.squareness_rad) < 1e-9 * ref.crb_rad
+    assert abs(fast.eps_c_rad - ref.eps_c_rad) < 1e-9 * ref.u_eps_c_rad
+    assert fast.u_squareness_rad == pytest.approx(ref.u_squareness_rad, rel=1e-9)
+    assert fast.crb_rad == pytest.approx(ref.crb_rad, rel=1e-9)
+    assert fast.period_s == pytest.approx(ref.period_s, rel=1e-13)
+
+
+@given(
+    arrays(np.float64, st.tuples(st.integers(1, 50), st.integers(1, 3)), elements=floats),
+    st.data(),
+)
+def test_minus_row_column_by_column_is_bit_for_bit(a, data):
+    row = data.draw(arrays(np.float64, a.shape[1], elements=floats))
+    np.testing.assert_array_equal(segment._minus_row(a, row), a - row)
+    out = np.full(a.shape, np.nan)
+    assert segment._minus_row(a, row, out=out) is out
+    np.testing.assert_array_equal(out, a - row)

@@ -21,6 +21,7 @@ import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
+from imu_square.allocator import tune_allocator
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import AnalysisSettings
 from imu_square.monitor.encoding import first_line
@@ -197,10 +198,17 @@ _KNOWN = frozenset()
 def _init_worker(known):
     global _KNOWN
     _KNOWN = known
+    tune_allocator()  # a process of ours that only analyses files (imu_square.allocator)
 
 
 def _replay_with_known(path, job):
     return replay_file(path, job, _KNOWN)
+
+
+def _replay_on_dask_worker(path, job, known):
+    """:func:`replay_file` in a Dask worker, its allocator tuned first (once per process)."""
+    tune_allocator()
+    return replay_file(path, job, known)
 
 
 def run_local(paths, job, known=frozenset(), jobs=None):
@@ -280,7 +288,12 @@ def run_dask(paths, job, known=frozenset(), scheduler=None, workers=2):
             # a list of one each: scatter sends a collection's items, not the collection
             known_future, job_future = client.scatter([known, job], broadcast=True)
             futures = client.map(
-                replay_file, list(paths), job=job_future, known=known_future, pure=False, retries=2
+                _replay_on_dask_worker,
+                list(paths),
+                job=job_future,
+                known=known_future,
+                pure=False,
+                retries=2,
             )
             for future in as_completed(futures):
                 yield future.result()

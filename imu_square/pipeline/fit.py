@@ -117,7 +117,7 @@ class FitResult:
 
 def _mad0(resid, present=None):
     if present is None:
-        return row_medians(np.abs(resid)) / _MAD_TO_SD
+        return row_medians(np.abs(resid), overwrite_input=True) / _MAD_TO_SD  # ours: no copy
     return np.nanmedian(np.where(present, np.abs(resid), np.nan), axis=-1) / _MAD_TO_SD
 
 

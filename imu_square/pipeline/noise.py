@@ -39,7 +39,8 @@ from scipy import fft as sp_fft
 from scipy import linalg, signal
 
 from imu_square.pipeline.filter import design_lowpass
-from imu_square.pipeline.order_stats import column_medians
+from imu_square.pipeline.order_stats import row_medians
+from imu_square.pipeline.trig import cos_sin
 from imu_square.pipeline.uncertainty import cramer_rao
 
 _MAD_TO_SD = 1.4826
@@ -144,16 +145,30 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
             block = blocks[b]
             lo, hi = np.searchsorted(t_s, t0)
             phi = segmentation.phi(block, t_s[lo:hi])
-            c, s = np.cos(phi), np.sin(phi)
             # phi minus whole turns by floor, not np.mod (ten times slower): within an ulp
-            # of [0, turn), which the table's wrapped ends cover.
-            rem = np.interp(phi - turn * np.floor(phi / turn), table_phi, table_rem)
-            res = np.empty((hi - lo, 2))
+            # of [0, turn), which the table's wrapped ends cover. In place: fresh arrays
+            # cost page faults.
+            reduced = np.divide(phi, turn)
+            np.floor(reduced, out=reduced)
+            reduced *= turn
+            np.subtract(phi, reduced, out=reduced)
+            c, s = cos_sin(reduced, out=(phi, np.empty_like(phi)))
+            rem = np.interp(reduced, table_phi, table_rem)
+            # Residuals axis by axis into the rows of a (2, n) array, handed out as its
+            # (n, 2) transpose: the noise spectrum takes the rows as they are.
+            res = np.empty((2, hi - lo))
             for axis, (p, r) in enumerate(zip(params, (rem.real, rem.imag), strict=True)):
-                model = p[0] + (p[1] * c + p[2] * s) / mean_fit.gain
+                model = np.multiply(c, p[1], out=reduced)
+                model += np.multiply(s, p[2], out=res[axis])
+                model /= mean_fit.gain
+                model += p[0]
                 model += r
-                res[:, axis] = raw[lo:hi, axis] - model
+                np.subtract(raw[lo:hi, axis], model, out=res[axis])
+            res = res.T
             ok = valid[lo:hi]
+            if ok.all():
+                out.append(res)
+                continue
             edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
             out += [res[a:z] for a, z in zip(edges[::2], edges[1::2], strict=True)]
     return out
@@ -201,8 +216,12 @@ def white_density(residuals, sample_rate_hz):
         RMS over the axes of ``sd / sqrt(fs / 2)``; an overestimate where the
         data hold vibration the model does not. [m/s^2/sqrt(Hz)]
     """
-    r = np.concatenate(residuals, axis=0).T.copy()  # one contiguous row per axis
-    sd = _MAD_TO_SD * column_medians(np.abs(r - column_medians(r.T)[:, None]).T)
+    # One contiguous row per axis, our own copy: partitioned and overwritten in place
+    # (the medians need not the order; fresh arrays cost page faults).
+    r = np.concatenate([x.T for x in residuals], axis=1)
+    r -= row_medians(r, overwrite_input=True)[:, None]
+    np.abs(r, out=r)
+    sd = _MAD_TO_SD * row_medians(r, overwrite_input=True)
     return float(np.sqrt(np.mean(sd**2) / (sample_rate_hz / 2)))
 
 

@@ -54,7 +54,7 @@ def column_medians(values):
     return np.array([median(a[:, j]) for j in range(a.shape[1])])
 
 
-def row_medians(values):
+def row_medians(values, overwrite_input=False):
     """Median of each row of a 2-D array, as ``np.median(values, axis=-1)``.
 
     One partition around the upper middle and the maximum below it: numpy
@@ -64,6 +64,9 @@ def row_medians(values):
     ----------
     values : ndarray, shape (n_rows, n)
         Any values, at least one per row. [any unit]
+    overwrite_input : bool
+        Partition ``values`` itself (a float64 array; its order is lost, not
+        its values), as ``np.median``'s option: no copy.
 
     Returns
     -------
@@ -72,10 +75,15 @@ def row_medians(values):
     """
     a = np.asarray(values, dtype=np.float64)
     k = a.shape[-1] // 2
-    part = np.partition(a, k, axis=-1)
+    if overwrite_input:
+        a.partition(k, axis=-1)
+        part = a
+    else:
+        part = np.partition(a, k, axis=-1)
     upper = part[..., k]
     mid = upper if a.shape[-1] % 2 else (part[..., :k].max(axis=-1) + upper) / 2
-    return np.where(np.isnan(part[..., k:]).any(axis=-1), np.nan, mid)
+    # NaN sorts last, and max propagates it: one reduction, no boolean temporary
+    return np.where(np.isnan(part[..., k:].max(axis=-1)), np.nan, mid)
 
 
 def quantile(values, q):

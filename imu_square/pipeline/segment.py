@@ -30,6 +30,7 @@ import numpy as np
 
 from imu_square.errors import AnalysisError
 from imu_square.pipeline.order_stats import column_medians, median, quantile
+from imu_square.pipeline.trig import cos_sin
 
 # Motion intervals closer than this fraction of a period are one interval.
 _MERGE_PERIODS = 0.1
@@ -169,6 +170,19 @@ def _runs(mask):
     return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
 
 
+def _minus_row(a, row, out=None):
+    """``a - row`` for an (n, k) array and a (k,) row, column by column. [unit of a]
+
+    numpy broadcasts ``a - row`` with an inner loop of k elements, eight times
+    slower for k = 2; the numbers are the same, bit for bit. ``out`` (float64,
+    shape of ``a``) receives it.
+    """
+    out = np.empty(a.shape) if out is None else out
+    for j in range(a.shape[1]):
+        np.subtract(a[:, j], row[j], out=out[:, j])
+    return out
+
+
 def _magnitude(rel, out=None):
     """Length of each row's (x, y): within an ulp of ``np.hypot``, six times faster. [m/s^2]
 
@@ -255,8 +269,7 @@ def _phase_slope(u, dev, omega):
     np.divide(u, half, out=basis[1])
     c, s, c2, s2 = basis[2], basis[3], basis[4], basis[5]
     np.multiply(omega, u, out=c2)
-    np.cos(c2, out=c)
-    np.sin(c2, out=s)
+    cos_sin(c2, out=(c, s))  # to a few ulps of np.cos, np.sin; four times faster
     np.multiply(s, s, out=s2)
     np.multiply(c, c, out=c2)
     c2 -= s2
@@ -436,7 +449,7 @@ def find_motion(t_s, accel_xy, program):
     """
     t_s = np.asarray(t_s, dtype=np.float64)
     baseline = column_medians(accel_xy)
-    rel = accel_xy - baseline
+    rel = _minus_row(accel_xy, baseline)
     env = _magnitude(rel)
     plans = program.blocks()
     nominal = program.block_duration_s
@@ -453,7 +466,7 @@ def find_motion(t_s, accel_xy, program):
         # is pulled by the circles, which would make start and stop asymmetric.
         baseline = column_medians(accel_xy[rest])
         # Into the first pass's arrays: a fresh allocation costs more than the arithmetic.
-        rel = np.subtract(accel_xy, baseline, out=rel)
+        rel = _minus_row(accel_xy, baseline, out=rel)
         env = _magnitude(rel, out=env)
         intervals = _motion_intervals(t_s, env, thr, program.period_s)
     crossings = [(_crossing(t_s, env, a, thr), _crossing(t_s, env, b, thr)) for a, b in intervals]
