@@ -24,7 +24,7 @@ code's, and the total is what ``replay`` and ``analyze`` see.
 Usage::
 
     python benchmarks/per_file.py [--runs 21] [--baseline PATH] [--baseline-commit 28f8832]
-        [--allocator default|tuned|both]
+                                  [--allocator default|tuned|both] [--recording RUN.mcap]
 
 Writes ``benchmarks/results/per_file.json``.
 """
@@ -201,16 +201,29 @@ def main(argv=None):
         help="glibc's defaults (the code alone), the thresholds imu_square.allocator sets in "
         "the processes that analyse files, or both in turn (default); each on both sides",
     )
+    parser.add_argument(
+        "--recording",
+        metavar="RUN.mcap",
+        help="time this recording instead of the paper's test with a servo mismatch (e.g. one "
+        "of benchmarks/replay.py's: a typical machine, whose spikes cost the robust fits more)",
+    )
     args = parser.parse_args(argv)
     old_root = Path(args.baseline) if args.baseline else baseline_tree(args.baseline_commit)
     modes = ("default", "tuned") if args.allocator == "both" else (args.allocator,)
     result = {"baseline": str(old_root), "runs": args.runs, "allocators": {}}
     with tempfile.TemporaryDirectory(prefix="imu-per-file-") as tmp:
-        mcap = Path(tmp) / "run.mcap"
-        duration, n = make_recording(mcap, args.seed)
+        if args.recording:
+            from imu_square.io.mcap import read_mcap
+
+            mcap = Path(args.recording)
+            rec = read_mcap(mcap)
+            duration, n = rec.duration_s, rec.n_samples
+        else:
+            mcap = Path(tmp) / "run.mcap"
+            duration, n = make_recording(mcap, args.seed)
         size_mb = mcap.stat().st_size / 1e6
         result["recording"] = {"duration_s": duration, "samples": n, "mb": size_mb}
-        result["recording"]["seed"] = args.seed
+        result["recording"]["source"] = str(args.recording or f"seed {args.seed}")
         for mode in modes:
             result["allocators"][mode] = measure(old_root, mcap, mode, args)
     for mode in modes:
