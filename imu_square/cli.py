@@ -94,7 +94,14 @@ def build_parser(only=None):
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in commands().items():
         if only is None:
-            sub.add_parser(name, help=command_help(module), add_help=False)
+            try:
+                summary = command_help(module)
+            except (LookupError, OSError, SyntaxError, ValueError):
+                # A plugin's module without a literal HELP (written when register() was
+                # all a command needed): registered in full, its imports paid, as before.
+                importlib.import_module(module).register(sub)
+                continue
+            sub.add_parser(name, help=summary, add_help=False)
         elif name == only:
             importlib.import_module(module).register(sub)
     return parser
@@ -127,6 +134,8 @@ def _module_source(module):
     (``importlib.util.find_spec`` would import ``acquisition`` for its commands)."""
     top, *rest = module.split(".")
     spec = importlib.util.find_spec(top)
+    if not rest:  # a top-level module (a plugin of one file, or a package's __init__)
+        return Path(spec.origin)
     where = Path(next(iter(spec.submodule_search_locations)))
     for part in rest[:-1]:
         where = where / part
