@@ -7,7 +7,8 @@ imports it). Each module defines ``HELP``, its one-line summary as a string
 literal, and ``register(subparsers)``, which adds one parser (with that help)
 whose ``func`` default takes the parsed arguments and returns an exit code.
 ``imu-square --help`` reads every ``HELP`` from the modules' source without
-importing them, so that listing the commands costs no command's imports.
+importing them, so that listing the commands costs no command's imports (a
+plugin's module without a literal ``HELP`` is imported and registered instead).
 
 Human-readable text goes to stderr; machine-readable results go to stdout.
 A user's mistake is one line on stderr and a non-zero exit, never a traceback.
