@@ -14,7 +14,9 @@ memory more than it would, which a worker busy with files uses again at once.
 ``ctypes``), in the processes the package runs files in: the ``analyze`` and
 ``replay`` commands, the replay's worker processes and its Dask tasks. The
 library never calls it on import: a user's own process keeps its allocator.
-``IMU_SQUARE_MALLOC_TUNING=0`` in the environment leaves glibc's defaults.
+``IMU_SQUARE_MALLOC_TUNING=0`` (or ``false``, ``no``, ``off``) in the environment
+leaves glibc's defaults, and so does a value that is none of these nor ``1``
+(with a warning).
 """
 
 import ctypes
@@ -27,6 +29,8 @@ TRIM_THRESHOLD_BYTES = 128 * 1024 * 1024
 _M_TRIM_THRESHOLD = -1  # <malloc.h>
 _M_MMAP_THRESHOLD = -3
 _OPT_OUT = "IMU_SQUARE_MALLOC_TUNING"
+_OFF = ("0", "false", "no", "off")
+_ON = ("1", "true", "yes", "on", "")
 
 _state = {"applied": None}
 
@@ -48,8 +52,16 @@ def tune_allocator():
 
 
 def _apply():
-    if os.environ.get(_OPT_OUT, "1").strip() == "0":
-        logger.debug("allocator: %s=0, glibc's defaults kept", _OPT_OUT)
+    setting = os.environ.get(_OPT_OUT, "1").strip().lower()
+    if setting in _OFF:
+        logger.debug("allocator: %s=%s, glibc's defaults kept", _OPT_OUT, setting)
+        return False
+    if setting not in _ON:  # set, so meant to change something: the safe side is no change
+        logger.warning(
+            "allocator: %s must be 0 or 1, got %r: glibc's defaults kept",
+            _OPT_OUT,
+            os.environ[_OPT_OUT],
+        )
         return False
     if not _is_glibc():
         return False

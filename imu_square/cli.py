@@ -7,7 +7,8 @@ imports it). Each module defines ``HELP``, its one-line summary as a string
 literal, and ``register(subparsers)``, which adds one parser (with that help)
 whose ``func`` default takes the parsed arguments and returns an exit code.
 ``imu-square --help`` reads every ``HELP`` from the modules' source without
-importing them, so that listing the commands costs no command's imports.
+importing them, so that listing the commands costs no command's imports (a
+plugin's module without a literal ``HELP`` is imported and registered instead).
 
 Human-readable text goes to stderr; machine-readable results go to stdout.
 A user's mistake is one line on stderr and a non-zero exit, never a traceback.
@@ -94,7 +95,14 @@ def build_parser(only=None):
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in commands().items():
         if only is None:
-            sub.add_parser(name, help=command_help(module), add_help=False)
+            try:
+                summary = command_help(module)
+            except (LookupError, OSError, SyntaxError, ValueError):
+                # A plugin's module without a literal HELP (written when register() was
+                # all a command needed): registered in full, its imports paid, as before.
+                importlib.import_module(module).register(sub)
+                continue
+            sub.add_parser(name, help=summary, add_help=False)
         elif name == only:
             importlib.import_module(module).register(sub)
     return parser
@@ -127,6 +135,8 @@ def _module_source(module):
     (``importlib.util.find_spec`` would import ``acquisition`` for its commands)."""
     top, *rest = module.split(".")
     spec = importlib.util.find_spec(top)
+    if not rest:  # a top-level module (a plugin of one file, or a package's __init__)
+        return Path(spec.origin)
     where = Path(next(iter(spec.submodule_search_locations)))
     for part in rest[:-1]:
         where = where / part

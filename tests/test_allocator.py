@@ -78,6 +78,29 @@ def test_the_environment_can_keep_glibcs_defaults():
     assert probe == {"applied": False, "mmap": True}
 
 
+@pytest.mark.parametrize("value", ["off", "False", " no "])
+def test_the_environment_says_off_in_words_too(value):
+    # "off" and "false" tuned the allocator: only "0" was read as off
+    call = "from imu_square.allocator import tune_allocator; applied = tune_allocator()"
+    assert _probe(call, {"IMU_SQUARE_MALLOC_TUNING": value}) == {"applied": False, "mmap": True}
+
+
+def test_an_unreadable_setting_keeps_glibcs_defaults_and_says_so(tmp_path):
+    call = "from imu_square.allocator import tune_allocator; applied = tune_allocator()"
+    assert _probe(call, {"IMU_SQUARE_MALLOC_TUNING": "maybe"}) == {"applied": False, "mmap": True}
+    # the analyze command, which tunes, says why it did not
+    run = "import sys; from imu_square.cli import main; sys.exit(main(sys.argv[1:]))"
+    out = subprocess.run(
+        [sys.executable, "-c", run, "analyze", str(tmp_path / "none.mcap")],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, IMU_SQUARE_MALLOC_TUNING="maybe"),
+        timeout=60,
+    )
+    assert out.returncode == 2
+    assert "IMU_SQUARE_MALLOC_TUNING must be 0 or 1, got 'maybe'" in out.stderr
+
+
 def test_replay_worker_processes_are_tuned_on_start():
     call = "from imu_square.monitor import replay; replay._init_worker(frozenset()); applied = 1"
     assert _probe(call)["mmap"] is False

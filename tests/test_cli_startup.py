@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from imu_square.cli import build_parser, command_help, commands
+from imu_square.cli import build_parser, command_help, commands, main
 
 HEAVY = ("matplotlib", "scipy.optimize", "acquisition")
 # what each command may pull in at start-up, because registering it needs it
@@ -89,3 +89,46 @@ def test_the_listing_shows_what_the_command_registers(name):
     registered = next(c.help for c in sub._choices_actions if c.dest == name)
     assert listed == registered == importlib.import_module(module).HELP
     assert listed and "\n" not in listed
+
+
+def _install_plugin(root, dist, modules, commands_):
+    """A real installed distribution: its modules and an imu_square.commands entry point each."""
+    for relative, text in modules.items():
+        path = root / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    info = root / f"{dist}-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 1.0\n")
+    lines = "".join(f"{name} = {module}\n" for name, module in commands_.items())
+    (info / "entry_points.txt").write_text(f"[imu_square.commands]\n{lines}")
+
+
+def test_a_plugin_without_help_or_of_one_file_is_listed(tmp_path, monkeypatch, capsys):
+    # A plugin written when register() was all a command needed has no HELP; one of a
+    # single file has no package to look in. `imu-square --help` crashed on either.
+    register = (
+        "def register(sub):\n"
+        "    p = sub.add_parser({name!r}, help={summary!r})\n"
+        "    p.set_defaults(func=lambda args: 0)\n"
+    )
+    _install_plugin(
+        tmp_path,
+        "oldplug",
+        {
+            "oldplug/__init__.py": "",
+            "oldplug/cmd.py": register.format(name="oldcmd", summary="a plugin without HELP"),
+            "oneplug.py": 'HELP = "a plugin of one file"\n'
+            + register.format(name="onecmd", summary="a plugin of one file"),
+        },
+        {"oldcmd": "oldplug.cmd", "onecmd": "oneplug"},
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    listed = " ".join(capsys.readouterr().out.split())
+    assert "oldcmd a plugin without HELP" in listed and "onecmd a plugin of one file" in listed
+    assert "analyze squareness from recorded runs" in listed
+    assert main(["-v"]) == 2 and "oldcmd" in capsys.readouterr().err
+    assert main(["oldcmd"]) == 0 and main(["onecmd"]) == 0

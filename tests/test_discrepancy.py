@@ -329,6 +329,20 @@ def test_a_run_that_fails_leaves_no_model_folder_behind(tmp_path, capsys):
     assert not (tmp_path / "new").exists()
 
 
+@pytest.mark.parametrize("target", ["link", "link/model"])
+def test_a_model_folder_through_a_broken_link_is_refused_before_the_work(tmp_path, capsys, target):
+    # The check walked up to the first existing folder and passed; making the folder
+    # after the fit then raised FileExistsError as a traceback, and the fit was lost.
+    path, _ = record(tmp_path, seed=7)
+    (tmp_path / "link").symlink_to(tmp_path / "gone")
+    code, out, err = run_cli(capsys, path, "--model-out", tmp_path / target)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "cannot create the model folder" in err and "gone" in err and "does not exist" in err
+    assert "noise floor" not in err  # refused before the fit, not after it
+    assert (tmp_path / "link").is_symlink() and not (tmp_path / "gone").exists()
+
+
 def test_analyze_refuses_a_plot_in_a_missing_folder_before_the_work(tmp_path, capsys):
     path, _ = record(tmp_path, seed=7)
     code = main(["analyze", str(path), "--plot", str(tmp_path / "nodir" / "a.png")])

@@ -88,6 +88,11 @@ def check_folder_path(folder, what):
     folder = Path(folder)
     existing = folder
     while not existing.exists() and existing != existing.parent:
+        if existing.is_symlink():  # to nothing: making the folder would fail after the work
+            raise OutputError(
+                f"{folder}: cannot create the {what} folder: {str(existing)!r} is a symbolic "
+                f"link to {os.readlink(existing)!r}, which does not exist"
+            )
         existing = existing.parent
     if not existing.is_dir():
         raise OutputError(f"{folder}: cannot create the {what} folder: {str(existing)!r} is a file")
