@@ -359,3 +359,29 @@ def test_a_two_feed_recording_is_refused_in_the_user_s_terms(tmp_path, capsys):
     assert code == 2 and out == "" and err.count("\n") == 1
     assert f"{path}: the program runs 2 feeds (3000, 1800 mm/min)" in err
     assert "period_s" not in err and "at_feed" not in err
+
+
+def test_model_files_that_cannot_be_written_after_the_fit_are_one_line_and_exit_4(tmp_path):
+    # a disk that fills during the fit: the folder passed the check, the files cannot be written
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    path, _ = record(tmp_path, seed=7)
+
+    def no_room():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past it fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+
+    model = tmp_path / "model"
+    argv = [sys.executable, "-m", "imu_square.cli", "discrepancy", str(path), "--model-out"]
+    proc = subprocess.run(
+        [*argv, str(model)], capture_output=True, text=True, timeout=300, preexec_fn=no_room
+    )
+    assert proc.returncode == 4, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if "error" in line]
+    assert errors == [
+        f"imu-square discrepancy: error: {model}: writing the model files failed: File too large"
+    ], proc.stderr
+    assert "Traceback" not in proc.stderr

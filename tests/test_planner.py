@@ -279,7 +279,7 @@ PLAN_ARGS = ["plan", "--max-feed-mm-min", "30000", "--max-accel-m-s2", "5", "--t
         ),
         (
             ["--noise-ug", "25", "--eps-c-deg", "50"],
-            "--eps-c-deg (or the --sensor file's value) must be in [0, 45] deg, got 50 deg",
+            ": --eps-c-deg must be in [0, 45] deg, got 50 deg",
         ),
         (["--noise-ug", "25", "--detect-um-m", "-3"], "--detect-um-m must be in (0, 1e+06] µm/m"),
     ],
@@ -289,3 +289,17 @@ def test_cli_refusals_are_one_line_before_any_plan(tmp_path, capsys, extra, mess
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err  # no plan printed before the error
+
+
+def test_a_refused_sensor_file_value_is_named_as_the_file_s(tmp_path, capsys):
+    sensor = tmp_path / "s.toml"
+    sensor.write_text("[sensor]\nnoise_density_ug_rthz = 25.0\nrange_g = 2.0\neps_c_deg = 50.0\n")
+    argv = [*PLAN_ARGS, "--time-s", "300", "--sensor", str(sensor)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "--eps-c-deg (here the --sensor file's value) must be in [0, 45] deg, got 50 deg" in err
+    # the flag overrides the file: then the flag is what was refused
+    assert main([*argv, "--range-g", "-1"]) == 2
+    err = capsys.readouterr().err
+    assert ": --range-g must be in (0, 1019.72] g, got -1 g" in err, err

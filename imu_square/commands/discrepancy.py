@@ -49,7 +49,7 @@ def register(sub):
 def run(args):
     """Run the workflow and report; the exit code says whether effects were named."""
     from imu_square.discrepancy import DiscrepancyOptions, find_discrepancy
-    from imu_square.errors import AnalysisError, ImuSquareError
+    from imu_square.errors import AnalysisError, ImuSquareError, OutputWriteError
     from imu_square.io.mcap import read_mcap
     from imu_square.program import read_program
     from imu_square.simulate.writer import write_model_files
@@ -90,9 +90,14 @@ def run(args):
             f"Fitted by imu-square discrepancy to {args.recording}\n"
             f"effects: {', '.join(s.effect for s in result.steps) or 'none'}"
         )
-        paths = write_model_files(
-            args.model_out, result.program, result.machine, result.sensor, header
-        )
+        try:
+            paths = write_model_files(
+                args.model_out, result.program, result.machine, result.sensor, header
+            )
+        except OSError as exc:  # disk full, permissions changed during the fit
+            raise OutputWriteError(
+                f"{args.model_out}: writing the model files failed: {exc.strerror or exc}"
+            ) from None
         print(f"wrote {', '.join(str(p) for p in paths.values())}", file=sys.stderr)
     if args.plot:
         from imu_square.discrepancy.plot import plot_gaps

@@ -160,7 +160,7 @@ def run(args):
     try:
         plan = plan_test(sensor, limits, goal)
     except PlanInputError as exc:
-        raise _in_flag_units(exc) from None
+        raise _in_flag_units(exc, args) from None
     print(plan.summary(), file=sys.stderr)
     if args.output:
         out = Path(args.output)
@@ -174,8 +174,9 @@ def run(args):
     return 0 if plan.detects is not False else 1
 
 
-def _in_flag_units(exc):
-    """The planner's refusal of a value, restated with the option and the unit it came in."""
+def _in_flag_units(exc, args):
+    """The planner's refusal of a value, restated with the option and the unit it came in,
+    or as the --sensor file's value when it came from there."""
     from imu_square.planner import PlanError, interval
     from imu_square.units import MM, MM_PER_MIN, MS, UG, URAD, G
 
@@ -198,9 +199,14 @@ def _in_flag_units(exc):
     }[exc.parameter]
     lo, hi = (b / scale for b in exc.bounds)
     got = exc.value / scale
-    from_file = ("noise_density_m_s2_rthz", "flicker_corner_hz", "range_m_s2", "sample_rate_hz")
-    from_file += ("resolution_m_s2", "eps_c_rad")
-    where = " (or the --sensor file's value)" if exc.parameter in from_file else ""
+    # a sensor field the flag did not give came from the --sensor file
+    dest = {"noise_density_m_s2_rthz": "noise_density_ug", "eps_c_rad": "eps_c_deg"}.get(
+        exc.parameter, flag[2:].replace("-", "_")
+    )
+    file_fields = ("noise_density_m_s2_rthz", "flicker_corner_hz", "range_m_s2")
+    file_fields += ("sample_rate_hz", "resolution_m_s2", "eps_c_rad")
+    from_file = args.sensor and exc.parameter in file_fields and getattr(args, dest) is None
+    where = " (here the --sensor file's value)" if from_file else ""
     unit = f" {unit}" if unit else ""
     return PlanError(
         f"{flag}{where} must be in {interval((lo, hi), exc.closed)}{unit}, got {got:.6g}{unit}"
