@@ -163,6 +163,9 @@ def main(argv=None):
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     named = next((a for a in argv if not a.startswith("-")), None)
+    before = argv[: argv.index(named)] if named is not None else argv
+    if {"-h", "--help"} & set(before):  # `imu-square -h analyze`: the top-level help, whole
+        named = None
     parser = build_parser(only=named if named in commands() else None)
     args = parser.parse_args(argv)
     if args.command is None:

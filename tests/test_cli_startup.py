@@ -132,3 +132,11 @@ def test_a_plugin_without_help_or_of_one_file_is_listed(tmp_path, monkeypatch, c
     assert "analyze squareness from recorded runs" in listed
     assert main(["-v"]) == 2 and "oldcmd" in capsys.readouterr().err
     assert main(["oldcmd"]) == 0 and main(["onecmd"]) == 0
+
+
+def test_help_before_a_command_lists_every_command(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["-h", "analyze"])
+    assert exc.value.code == 0
+    listed = " ".join(capsys.readouterr().out.split())
+    assert all(f" {name} " in listed for name in commands())
