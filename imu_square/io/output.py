@@ -52,14 +52,20 @@ def check_output_path(path, *, overwrite=False):
         if not os.access(path, os.W_OK):
             raise OutputError(f"{path}: exists and is not writable")
         return path
-    try:  # the only sure test that a file can be created there (permissions, read-only mounts)
-        with tempfile.NamedTemporaryFile(dir=folder, prefix=".imu-square-probe-"):
-            pass
-    except OSError as exc:
-        raise OutputError(
-            f"{path}: cannot create a file in {str(folder)!r}: {exc.strerror or exc}"
-        ) from None
+    refused = _creation_refused(folder)
+    if refused:
+        raise OutputError(f"{path}: cannot create a file in {str(folder)!r}: {refused}")
     return path
+
+
+def _creation_refused(folder):
+    """Why a file cannot be created in ``folder``, or "" if it can: the only sure test
+    (permissions, read-only mounts) is to create one, which is removed at once."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".imu-square-probe-"):
+            return ""
+    except OSError as exc:
+        return str(exc.strerror or exc)
 
 
 def check_folder_path(folder, what):
@@ -96,13 +102,11 @@ def check_folder_path(folder, what):
         existing = existing.parent
     if not existing.is_dir():
         raise OutputError(f"{folder}: cannot create the {what} folder: {str(existing)!r} is a file")
-    try:  # as in check_output_path: the one sure test (permissions, read-only mounts)
-        with tempfile.NamedTemporaryFile(dir=existing, prefix=".imu-square-probe-"):
-            pass
-    except OSError as exc:
+    refused = _creation_refused(existing)
+    if refused:
         raise OutputError(
-            f"{folder}: cannot create the {what} folder in {str(existing)!r}: {exc.strerror or exc}"
-        ) from None
+            f"{folder}: cannot create the {what} folder in {str(existing)!r}: {refused}"
+        )
     return folder
 
 
