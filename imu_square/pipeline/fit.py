@@ -140,13 +140,19 @@ def _weights(norm, z, overwrite=False):
     return norm.weights(z)
 
 
-def _psi_and_deriv(norm, z):
-    if type(norm) is norms.TukeyBiweight:  # statsmodels' formulas, their terms computed once
-        v = 1.0 - np.square(z / norm.c)
-        v2 = np.square(v)
-        inside = np.abs(z) <= norm.c
-        psi = np.where(inside, z * v2, 0.0)
-        return psi, np.where(inside, v2 - (4 * np.square(z) / norm.c**2) * v, 0.0)
+def _psi_and_deriv(norm, z, overwrite=False):
+    # overwrite: z is the caller's temporary and becomes psi (as in _weights).
+    if type(norm) is norms.TukeyBiweight:  # statsmodels' formulas, with v = max(1 - (z/c)^2, 0)
+        v = np.square(z)
+        v *= -1.0 / norm.c**2
+        v += 1.0
+        np.fmax(v, 0.0, out=v)  # 0 beyond c: psi and psi' vanish there
+        dpsi = 5.0 * v  # psi' = v^2 - 4 (z/c)^2 v = v (5 v - 4)
+        dpsi -= 4.0
+        dpsi *= v
+        psi = np.multiply(z, v, out=z if overwrite else None)
+        psi *= v
+        return psi, dpsi
     return norm.psi(z), norm.psi_deriv(z)
 
 
@@ -420,12 +426,33 @@ class CircleFit:
         return np.mod(self.theta_x + half + np.pi, 2 * np.pi) - np.pi
 
 
-def _phase(a, b, cov, da, db):
+def circle_phases(params_x, params_y):
+    """Phases ``theta_x``, ``theta_y`` of stage-1 coefficients.
+
+    Parameters
+    ----------
+    params_x, params_y : ndarray, shape (n_fits, 3)
+        Coefficients ``[c, cos, sin]`` of the x and of the y fits. [m/s^2]
+
+    Returns
+    -------
+    theta_x, theta_y : ndarray, shape (n_fits,)
+        [rad]
+    """
+    # a_x = c - A cos(phi - th) = c - A cos(th) cos(phi) - A sin(th) sin(phi)
+    # a_y = c - A sin(phi - th) = c + A sin(th) cos(phi) - A cos(th) sin(phi)
+    return (
+        np.arctan2(-params_x[:, 2], -params_x[:, 1]),
+        np.arctan2(params_y[:, 1], -params_y[:, 2]),
+    )
+
+
+def _u_phase(a, b, cov, da, db):
     # theta = atan2(a, b): delta-method standard error from the 2x2 covariance.
     r2 = a**2 + b**2
     ga, gb = b / r2, -a / r2
     var = ga**2 * cov[:, da, da] + gb**2 * cov[:, db, db] + 2 * ga * gb * cov[:, da, db]
-    return np.arctan2(a, b), np.sqrt(var)
+    return np.sqrt(var)
 
 
 def fit_circle(
@@ -469,10 +496,9 @@ def fit_circle(
     kw = dict(prior_weights=prior_weights, covariance=covariance, **irls_options)
     fx = fit_irls(exog, accel_x, norm, start_params=sx, **kw)
     fy = fit_irls(exog, accel_y, norm, start_params=sy, **kw)
-    # a_x = c - A cos(phi - th) = c - A cos(th) cos(phi) - A sin(th) sin(phi)
-    theta_x, u_x = _phase(-fx.params[:, 2], -fx.params[:, 1], fx.cov, 2, 1)
-    # a_y = c - A sin(phi - th) = c + A sin(th) cos(phi) - A cos(th) sin(phi)
-    theta_y, u_y = _phase(fy.params[:, 1], -fy.params[:, 2], fy.cov, 1, 2)
+    theta_x, theta_y = circle_phases(fx.params, fy.params)
+    u_x = _u_phase(-fx.params[:, 2], -fx.params[:, 1], fx.cov, 2, 1)
+    u_y = _u_phase(fy.params[:, 1], -fy.params[:, 2], fy.cov, 1, 2)
     return CircleFit(
         theta_x=theta_x,
         theta_y=theta_y,

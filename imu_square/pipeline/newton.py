@@ -1,0 +1,125 @@
+"""Robust fits near a known solution by Newton's method: the bootstrap's solver.
+
+:func:`imu_square.pipeline.fit.fit_irls` solves the M-estimate's equations
+``sum_i sqrt(p_i) psi(z_i) x_i = 0``, ``z_i = sqrt(p_i) r_i / s``, ``s`` the
+MAD scale of the ``z``, by reweighted least squares, which converges
+linearly: on a typical machine's spiky traces the error shrinks about four
+times a step, so a resample started from its direction's fit takes nine or
+ten steps to reach 1e-10 m/s^2. Newton's step uses ``psi'`` where IRLS uses
+the weights ``psi(z) / z`` and converges quadratically at a fixed scale;
+re-estimating the scale after every step, as IRLS does, keeps IRLS's fixed
+point. So the estimate is the same, within the tolerance, in three or four
+steps.
+
+Newton needs a start near the solution and a Hessian ``sum p_i psi'(z_i) x_i
+x_i^T`` that stays positive definite (Tukey's ``psi'`` is negative beyond
+``c / sqrt(5)``). A row that loses either, or has not converged in
+``newton_steps``, is handed to ``fit_irls`` from its start, so every row ends
+at the estimate IRLS would give.
+"""
+
+import numpy as np
+
+from imu_square.pipeline.fit import _mad0, _psi_and_deriv, fit_irls
+
+
+def fit_newton(
+    exog, endog, start_params, norm, *, prior_weights=None, newton_tol=None, newton_steps=12, **irls
+):
+    """Robust linear fits of the rows of ``endog``, started near their solution.
+
+    Same estimate as :func:`imu_square.pipeline.fit.fit_irls` with
+    ``conv="coefs"`` (every coefficient moves less than ``tol`` in the last
+    step), the scale re-estimated at every step; only the coefficients are
+    returned.
+
+    Parameters
+    ----------
+    exog : ndarray, shape (n_obs, n_params)
+        Design matrix, shared by all fits, full column rank.
+    endog : ndarray, shape (n_fits, n_obs)
+        Observations, one fit per row. [any unit]
+    start_params : ndarray, shape (n_params,) or (n_fits, n_params)
+        Starting coefficients, near the solution (e.g. the fit of the data the
+        rows resample). [unit of endog]
+    norm : statsmodels.robust.norms.RobustNorm
+        The robust norm.
+    prior_weights : ndarray, shape (n_fits, n_obs), optional
+        Inverse relative variance of each observation, 0 where it holds no data
+        (as in ``fit_irls``). All ones if None.
+    newton_tol : float, optional
+        Largest change of every coefficient in the last Newton step; ``irls``'s
+        ``tol`` if None. [unit of endog]
+    newton_steps : int
+        Newton steps before a row is handed to IRLS.
+    **irls
+        ``fit_irls``'s options (``tol``, ``maxiter``, ``freeze_scale_after``)
+        for the rows it takes over; with ``conv="dev"`` every row goes to it.
+
+    Returns
+    -------
+    params : ndarray, shape (n_fits, n_params)
+        The coefficients. [unit of endog]
+    handed_over : int
+        How many rows IRLS finished.
+    """
+    exog = np.asarray(exog, dtype=np.float64)
+    endog = np.atleast_2d(np.asarray(endog, dtype=np.float64))
+    n, p = exog.shape
+    start = np.broadcast_to(np.asarray(start_params, dtype=np.float64), (endog.shape[0], p))
+    params = start.copy()
+    tol = irls.get("tol", 1e-8) if newton_tol is None else newton_tol
+    prior = None if prior_weights is None else np.asarray(prior_weights, dtype=np.float64)
+    if prior is not None:
+        present = prior > 0
+        endog = np.where(present, endog, 0.0)
+        root = np.sqrt(prior)
+    outer = (exog[:, :, None] * exog[:, None, :]).reshape(n, p * p)
+    newton = np.full(endog.shape[0], irls.get("conv", "coefs") == "coefs")
+    active = newton.copy()
+    for _ in range(newton_steps):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        z = endog[idx] - params[idx] @ exog.T
+        if prior is None:
+            scale = _mad0(z.copy())
+        else:
+            z *= root[idx]
+            scale = _mad0(z, present[idx])
+        moved = scale > 0.0  # else an exact fit: nothing to move
+        active[idx[~moved]] = False
+        idx, z, scale = idx[moved], z[moved], scale[moved]
+        z /= scale[:, None]
+        psi, dpsi = _psi_and_deriv(norm, z, overwrite=True)
+        if prior is not None:
+            psi *= root[idx]
+            dpsi *= prior[idx]
+        hessian = (dpsi @ outer).reshape(-1, p, p)
+        definite = _positive_definite(hessian)
+        newton[idx[~definite]] = active[idx[~definite]] = False
+        idx, scale = idx[definite], scale[definite]
+        step = np.linalg.solve(hessian[definite], (psi[definite] @ exog)[..., None])[..., 0]
+        step *= scale[:, None]
+        params[idx] += step
+        active[idx] = np.any(np.abs(step) > tol, axis=-1)
+    rest = np.flatnonzero(~newton | active)
+    if rest.size:
+        options = {k: v for k, v in irls.items() if k != "covariance"}
+        again = fit_irls(
+            exog,
+            endog[rest],
+            norm,
+            start_params=start[rest],
+            prior_weights=None if prior is None else prior[rest],
+            covariance=False,
+            **options,
+        )
+        params[rest] = again.params
+    return params, int(rest.size)
+
+
+def _positive_definite(matrices):
+    # Sylvester's criterion: every leading minor positive (cheaper than eigenvalues for 3x3).
+    p = matrices.shape[-1]
+    return np.all([np.linalg.det(matrices[:, :k, :k]) > 0 for k in range(1, p + 1)], axis=0)
