@@ -217,7 +217,7 @@ def fit_irls(
     covariance : bool
         Compute ``cov`` and ``bse``; if False they are NaN (the fits are the
         same): for many fits whose spread, not covariance, is wanted, it saves
-        about a fifth of the cost (the per-cycle and bootstrap fits).
+        about a fifth of the cost (the per-cycle fits).
 
     Returns
     -------

@@ -1,14 +1,16 @@
-"""Every cycle fitted on its own, and bootstrap resamples, in one batch.
+"""Every cycle fitted on its own, and bootstrap resamples, each in one batch.
 
 CCW cycle k and CW cycle k form a pair (:mod:`imu_square.pipeline.align`);
 each pair gives its own ``theta_y - theta_x`` (the mean of its two cycles),
 servo mismatch and ``eps_c``. Their scatter is the type A uncertainty, and
 their times (and temperatures) let the monitor regress the drift within a
 night. The bootstrap resamples whole cycles within each direction and refits
-the means. All rows share one phi grid, so they are solved as one vectorised
-IRLS batch, each started from its direction's fit of the mean. Grid points
-inside bridged gaps hold no data and are left out of every fit (a resampled
-mean weighs each point by the cycles holding data there).
+the means. All rows share one phi grid, so the cycles are solved as one
+vectorised IRLS batch and the resamples as one Newton batch
+(:mod:`imu_square.pipeline.newton`), each row started from its direction's
+fit of the mean. Grid points inside bridged gaps hold no data and are left
+out of every fit (a resampled mean weighs each point by the cycles holding
+data there).
 """
 
 from dataclasses import dataclass
