@@ -11,11 +11,11 @@ from numpy.testing import assert_allclose
 from imu_square.errors import ImuSquareWarning
 from imu_square.pipeline.fit import (
     fit_circle,
-    fit_cross_terms,
     fit_irls,
     robust_norm,
     sine_design,
 )
+from imu_square.pipeline.stage2 import fit_cross_terms
 
 PHI = 2 * np.pi * (np.arange(1024) + 0.5) / 1024
 A = 0.1  # v^2/r of the paper's test [m/s^2]

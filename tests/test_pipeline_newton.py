@@ -10,6 +10,7 @@ from imu_square.pipeline import squareness as sq
 from imu_square.pipeline.fit import circle_phases, fit_circle, fit_irls, robust_norm, sine_design
 from imu_square.pipeline.newton import fit_newton
 from imu_square.pipeline.options import AnalysisOptions
+from imu_square.pipeline.stage2 import fit_cross_terms
 from imu_square.pipeline.uncertainty import bootstrap_counts
 from imu_square.program import read_program
 from imu_square.simulate import data_path, read_machine, read_sensor, simulate_run
@@ -122,3 +123,20 @@ def test_bootstrap_spread_is_the_irls_one(typical_run, monkeypatch):
     reference = np.std(0.5 * (boot[0] + boot[1]), ddof=1)
     assert result.u_squareness_bootstrap_rad == pytest.approx(reference, rel=1e-3)
     assert result.quality["warnings"]  # the spikes are there: the fits reject points
+
+
+def test_stage_two_by_newton_is_the_irls_fit():
+    rng = np.random.default_rng(3)
+    a_x = 0.002 - 0.1 * np.cos(PHI - 3e-4) + rng.normal(0, 1e-3, PHI.size)
+    a_y = -0.1 * np.sin(PHI + 1e-4) + rng.normal(0, 1e-3, PHI.size)
+    a_x[::50] += 0.05  # spikes, which the robust fits reject
+    a_y[25::50] -= 0.05
+    # A least-squares stage 1 takes the spikes in; the robust stage 2 then has work to do.
+    s1 = fit_circle(PHI, a_x, a_y, robust_norm("ols"), **IRLS)
+    ours = fit_cross_terms(PHI, s1, TUKEY, **IRLS)
+    ex = np.column_stack([np.ones_like(PHI), np.cos(PHI + np.pi / 2 - s1.theta_y[0])])
+    ey = np.column_stack([np.ones_like(PHI), np.cos(PHI - s1.theta_x[0])])
+    ref_y = fit_irls(ex, s1.x.resid[0], TUKEY, **IRLS).params[0, 1]  # from OLS, as statsmodels
+    ref_x = fit_irls(ey, s1.y.resid[0], TUKEY, **IRLS).params[0, 1]
+    assert abs(ours.c_y[0] - ref_y) < 1e-9 and abs(ours.c_x[0] - ref_x) < 1e-9
+    assert min(abs(ref_y), abs(ref_x)) > 1e-7  # not two zeros agreeing

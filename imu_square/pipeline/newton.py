@@ -81,28 +81,27 @@ def fit_newton(
         idx = np.flatnonzero(active)
         if idx.size == 0:
             break
-        z = endog[idx] - params[idx] @ exog.T
-        if prior is None:
-            scale = _mad0(z.copy())
-        else:
-            z *= root[idx]
-            scale = _mad0(z, present[idx])
-        moved = scale > 0.0  # else an exact fit: nothing to move
-        active[idx[~moved]] = False
-        idx, z, scale = idx[moved], z[moved], scale[moved]
-        z /= scale[:, None]
+        rows = slice(None) if idx.size == active.size else idx  # all rows: views, no copies
+        z = params[rows] @ exog.T
+        np.subtract(endog[rows], z, out=z)
+        if prior is not None:
+            z *= root[rows]
+        scale = _mad0(z, None if prior is None else present[rows])  # of |z|: z is kept
+        usable = scale > 0.0  # else an exact fit: nothing to move
+        z /= np.where(usable, scale, 1.0)[:, None]
         psi, dpsi = _psi_and_deriv(norm, z, overwrite=True)
         if prior is not None:
-            psi *= root[idx]
-            dpsi *= prior[idx]
+            psi *= root[rows]
+            dpsi *= prior[rows]
         hessian = (dpsi @ outer).reshape(-1, p, p)
         definite = _positive_definite(hessian)
-        newton[idx[~definite]] = active[idx[~definite]] = False
-        idx, scale = idx[definite], scale[definite]
-        step = np.linalg.solve(hessian[definite], (psi[definite] @ exog)[..., None])[..., 0]
-        step *= scale[:, None]
+        newton[idx[usable & ~definite]] = False  # IRLS takes these over
+        usable &= definite
+        hessian[~usable] = np.eye(p)
+        step = np.linalg.solve(hessian, (psi @ exog)[..., None])[..., 0]
+        step *= np.where(usable, scale, 0.0)[:, None]
         params[idx] += step
-        active[idx] = np.any(np.abs(step) > tol, axis=-1)
+        active[idx] = usable & np.any(np.abs(step) > tol, axis=-1)
     rest = np.flatnonzero(~newton | active)
     if rest.size:
         options = {k: v for k, v in irls.items() if k != "covariance"}

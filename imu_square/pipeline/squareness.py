@@ -39,7 +39,7 @@ from imu_square.log import logger
 from imu_square.pipeline import quality as q
 from imu_square.pipeline.align import bad_intervals, cycle_traces, interpolation_gain
 from imu_square.pipeline.filter import filter_recording, passband_gain
-from imu_square.pipeline.fit import fit_cross_terms, fit_mean_traces
+from imu_square.pipeline.fit import fit_mean_traces
 from imu_square.pipeline.noise import noise_floor
 from imu_square.pipeline.options import AnalysisOptions
 from imu_square.pipeline.per_cycle import fit_cycles
@@ -47,6 +47,7 @@ from imu_square.pipeline.result import DirectionResult, RunResult
 from imu_square.pipeline.rotation import circular_mean, eps_c_uncertainty, estimate_eps_c
 from imu_square.pipeline.segment import block_events, segment
 from imu_square.pipeline.servo import servo_amplitude_bound
+from imu_square.pipeline.stage2 import fit_cross_terms
 from imu_square.pipeline.uncertainty import coverage_factor, type_a
 
 __all__ = ["AnalysisOptions", "DirectionResult", "RunResult", "analyze"]
