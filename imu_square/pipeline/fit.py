@@ -143,9 +143,9 @@ def _weights(norm, z, overwrite=False):
 def _psi_and_deriv(norm, z, overwrite=False):
     # overwrite: z is the caller's temporary and becomes psi (as in _weights).
     if type(norm) is norms.TukeyBiweight:  # statsmodels' formulas, with v = max(1 - (z/c)^2, 0)
-        v = np.square(z)
-        v *= -1.0 / norm.c**2
-        v += 1.0
+        v = np.divide(z, norm.c)
+        np.square(v, out=v)
+        np.subtract(1.0, v, out=v)
         np.fmax(v, 0.0, out=v)  # 0 beyond c: psi and psi' vanish there
         dpsi = 5.0 * v  # psi' = v^2 - 4 (z/c)^2 v = v (5 v - 4)
         dpsi -= 4.0
@@ -417,13 +417,28 @@ class CircleFit:
 
     @property
     def mean_phase(self):
-        """``(theta_x + theta_y) / 2``, the sensor rotation when phi is anchored. [rad]
+        """``(theta_x + theta_y) / 2``, the sensor rotation when phi is anchored. [rad]"""
+        return mean_phase(self.theta_x, self.theta_y)
 
-        Taken as ``theta_x`` plus half the wrapped difference, so that a sensor
-        turned by about 180 deg (thetas either side of +-pi) averages to +-pi, not 0.
-        """
-        half = 0.5 * (np.mod(self.theta_y - self.theta_x + np.pi, 2 * np.pi) - np.pi)
-        return np.mod(self.theta_x + half + np.pi, 2 * np.pi) - np.pi
+
+def mean_phase(theta_x, theta_y):
+    """``(theta_x + theta_y) / 2``, the sensor rotation when phi is anchored.
+
+    Taken as ``theta_x`` plus half the wrapped difference, so that a sensor
+    turned by about 180 deg (thetas either side of +-pi) averages to +-pi, not 0.
+
+    Parameters
+    ----------
+    theta_x, theta_y : ndarray
+        Phases of the x and y fits. [rad]
+
+    Returns
+    -------
+    ndarray
+        In [-pi, pi). [rad]
+    """
+    half = 0.5 * (np.mod(theta_y - theta_x + np.pi, 2 * np.pi) - np.pi)
+    return np.mod(theta_x + half + np.pi, 2 * np.pi) - np.pi
 
 
 def circle_phases(params_x, params_y):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.pipeline.fit import circle_phases, fit_circle, sine_design, wrap_angle
+from imu_square.pipeline.fit import circle_phases, mean_phase, sine_design, wrap_angle
 from imu_square.pipeline.newton import fit_newton
 from imu_square.pipeline.uncertainty import bootstrap_counts, type_a
 
@@ -93,18 +93,18 @@ def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0
     main = mean_fit.fit
     which = np.repeat([0, 1], [ccw.n, cw.n])
     complete = ccw.complete and cw.complete
-    batch = fit_circle(
-        cycles.phi_grid,
-        np.concatenate([ccw.x, cw.x]),
-        np.concatenate([ccw.y, cw.y]),
-        norm,
-        start_params=(main.x.params[which], main.y.params[which]),
-        prior_weights=None if complete else np.concatenate([ccw.valid, cw.valid]).astype(float),
-        covariance=False,  # only the phases are used: their spread is the uncertainty
-        **irls,
+    exog = sine_design(cycles.phi_grid)
+    prior = None if complete else np.concatenate([ccw.valid, cw.valid]).astype(float)
+    theta_x, theta_y = circle_phases(
+        *(
+            fit_newton(
+                exog, np.concatenate(rows), start.params[which], norm, prior_weights=prior, **irls
+            )[0]
+            for rows, start in (((ccw.x, cw.x), main.x), ((ccw.y, cw.y), main.y))
+        )
     )
-    sq = wrap_angle(batch.squareness)
-    mp = batch.mean_phase
+    sq = wrap_angle(theta_y - theta_x)
+    mp = mean_phase(theta_x, theta_y)
     n1, n2 = ccw.n, cw.n
     common, i1, i2 = np.intersect1d(ccw.pair, cw.pair, return_indices=True)
     sq_ccw, sq_cw = sq[:n1][i1], sq[n1 : n1 + n2][i2]
