@@ -118,7 +118,60 @@ def fit_newton(
     return params, int(rest.size)
 
 
+def first_order_params(exog, fit, row, norm, change):
+    """Coefficients of a fit after a change of its data, to first order.
+
+    At an M-estimate, ``sum p_i psi(z_i) x_i = 0``; a change ``dy`` of the data
+    moves the coefficients by ``(X^T P D X)^-1 X^T P D dy`` with ``D = psi'(z)``
+    (the scale held). A start for :func:`fit_newton` on resampled data.
+
+    Parameters
+    ----------
+    exog : ndarray, shape (n_obs, n_params)
+        Design matrix of the fit.
+    fit : FitResult
+        The converged fits (:func:`imu_square.pipeline.fit.fit_irls`).
+    row : int
+        Which of its fits.
+    norm : statsmodels.robust.norms.RobustNorm
+        Its robust norm.
+    change : ndarray, shape (n_changes, n_obs)
+        Changes of its data, one per row; ignored where it held none. [unit of endog]
+
+    Returns
+    -------
+    ndarray, shape (n_changes, n_params)
+        The fit's coefficients plus their first-order change; the fit's own
+        where its ``psi'`` sum is not positive definite. [unit of endog]
+    """
+    prior = fit.prior_weights[row]
+    z = np.nan_to_num(fit.resid[row]) * np.sqrt(prior) / fit.scale[row]
+    _, dpsi = _psi_and_deriv(norm, z, overwrite=True)
+    dpsi *= prior
+    hessian = (exog.T * dpsi) @ exog
+    params = np.broadcast_to(fit.params[row], (change.shape[0], exog.shape[1]))
+    if not _positive_definite(hessian[None])[0]:
+        return params.copy()
+    gradient = np.where(prior > 0, change, 0.0) @ (exog * dpsi[:, None])
+    return params + np.linalg.solve(hessian, gradient.T).T
+
+
 def _positive_definite(matrices):
-    # Sylvester's criterion: every leading minor positive (cheaper than eigenvalues for 3x3).
-    p = matrices.shape[-1]
-    return np.all([np.linalg.det(matrices[:, :k, :k]) > 0 for k in range(1, p + 1)], axis=0)
+    # Sylvester's criterion: every leading minor positive. Written out for 2x2 and 3x3
+    # (the sine and cross-term fits): np.linalg.det costs ten times more on small batches.
+    h = matrices
+    p = h.shape[-1]
+    if p > 3:
+        return np.all([np.linalg.det(h[:, :k, :k]) > 0 for k in range(1, p + 1)], axis=0)
+    a = h[:, 0, 0]
+    if p == 1:
+        return a > 0
+    minor2 = a * h[:, 1, 1] - h[:, 0, 1] * h[:, 1, 0]
+    if p == 2:
+        return (a > 0) & (minor2 > 0)
+    det = (
+        a * (h[:, 1, 1] * h[:, 2, 2] - h[:, 1, 2] * h[:, 2, 1])
+        - h[:, 0, 1] * (h[:, 1, 0] * h[:, 2, 2] - h[:, 1, 2] * h[:, 2, 0])
+        + h[:, 0, 2] * (h[:, 1, 0] * h[:, 2, 1] - h[:, 1, 1] * h[:, 2, 0])
+    )
+    return (a > 0) & (minor2 > 0) & (det > 0)
