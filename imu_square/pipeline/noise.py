@@ -294,11 +294,21 @@ def flicker_fit(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz
     f, psd = f[band], psd[band]
     design = np.column_stack([np.ones_like(f), 1 / f])
     coef = np.array([np.median(psd), 0.0])
+    nll = _whittle_nll(design @ coef, psd)
     for _ in range(20):  # Whittle: least squares weighted by the model's inverse variance
-        model = np.maximum(design @ coef, 1e-6 * coef[0])
-        w = 1 / model**2
-        coef = np.linalg.solve(design.T @ (design * w[:, None]), design.T @ (w * psd))
-    model = np.maximum(design @ coef, 1e-6 * abs(coef[0]))
+        w = 1 / (design @ coef) ** 2
+        step = np.linalg.solve(design.T @ (design * w[:, None]), design.T @ (w * psd)) - coef
+        # Halved until the likelihood does not fall and the model stays positive: with
+        # few Welch segments the full steps can swing ever wider (seen: b/se = -1.6e6).
+        for _ in range(40):
+            trial = _whittle_nll(design @ (coef + step), psd)
+            if trial <= nll:
+                break
+            step /= 2
+        else:
+            break  # no step descends: at the optimum, to rounding
+        coef, nll = coef + step, trial
+    model = design @ coef
     # Sandwich covariance: the Welch bins are not independent (adjacent Hann bins
     # correlate by 4/9, overlapping segments by 1/36). Taken as independent, the
     # se of b was 0.7 of its spread, and 1 white run in 100 read as 1/f at "3 se".
@@ -309,6 +319,13 @@ def flicker_fit(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz
     lagged = same + 2 * (1 - n_series / n_avg) * neighbour
     cov = bread @ (scaled.T @ linalg.toeplitz(lagged[: f.size]) @ scaled) @ bread / n_avg
     return FlickerFit(float(coef[0]), float(coef[1]), float(np.sqrt(cov[1, 1])))
+
+
+def _whittle_nll(model, psd):
+    """Whittle's negative log-likelihood of a spectrum ``model`` for the estimate ``psd``."""
+    if not np.all(model > 0):
+        return np.inf
+    return float(np.sum(np.log(model) + psd / model))
 
 
 def flicker_corner(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz):
