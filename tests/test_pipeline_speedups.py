@@ -256,6 +256,20 @@ def test_clipped_times_with_a_valid_mask_are_those_of_the_valid_samples():
     assert 0 < clipped.size < np.count_nonzero(np.any(np.abs(raw) >= 0.999 * 20.0, axis=1))
 
 
+@settings(max_examples=50, deadline=None)
+@given(
+    arrays(
+        np.float32,
+        st.tuples(st.integers(1, 200), st.integers(1, 4)),
+        elements=st.floats(-40, 40, width=32) | st.sampled_from([np.nan, np.inf, -np.inf, 20.0]),
+    )
+)
+def test_clipped_times_column_by_column_are_numpys_any(raw):
+    t = np.arange(raw.shape[0]) * 1e-3
+    expected = t[np.any(np.abs(raw) >= 0.999 * 20.0, axis=1)]  # the call it replaces
+    np.testing.assert_array_equal(quality.clipped_times(t, raw, 20.0), expected)
+
+
 def _periodogram_sum_reference(r, window):
     """noise._periodogram_sum from scipy.signal.welch, its scaling undone."""
     n = window.size
