@@ -298,6 +298,8 @@ def flicker_fit(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz
     for _ in range(20):  # Whittle: least squares weighted by the model's inverse variance
         w = 1 / (design @ coef) ** 2
         step = np.linalg.solve(design.T @ (design * w[:, None]), design.T @ (w * psd)) - coef
+        if np.all(np.abs(step) <= 1e-9 * np.abs(coef).max()):
+            break  # converged: what is left is rounding
         # Halved until the likelihood does not fall and the model stays positive: with
         # few Welch segments the full steps can swing ever wider (seen: b/se = -1.6e6).
         for _ in range(40):

@@ -95,14 +95,12 @@ def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0
     complete = ccw.complete and cw.complete
     exog = sine_design(cycles.phi_grid)
     prior = None if complete else np.concatenate([ccw.valid, cw.valid]).astype(float)
-    theta_x, theta_y = circle_phases(
-        *(
-            fit_newton(
-                exog, np.concatenate(rows), start.params[which], norm, prior_weights=prior, **irls
-            )[0]
-            for rows, start in (((ccw.x, cw.x), main.x), ((ccw.y, cw.y), main.y))
-        )
-    )
+    if prior is not None:
+        prior = np.concatenate([prior, prior])
+    start = np.concatenate([main.x.params[which], main.y.params[which]])
+    rows = np.concatenate([ccw.x, cw.x, ccw.y, cw.y])  # x and y in one batch
+    params, _ = fit_newton(exog, rows, start, norm, prior_weights=prior, **irls)
+    theta_x, theta_y = circle_phases(params[: which.size], params[which.size :])
     sq = wrap_angle(theta_y - theta_x)
     mp = mean_phase(theta_x, theta_y)
     n1, n2 = ccw.n, cw.n
@@ -139,27 +137,28 @@ def _bootstrap(cycles, mean_fit, norm, irls, bootstrap_n, seed, u_pairs_rad):
     exog = sine_design(cycles.phi_grid)
     main = mean_fit.fit
     rng = np.random.default_rng(seed)
-    out = []
+    rows, starts, priors, tols = [], [], [], []  # CCW x, CCW y, CW x, CW y: one batch
     for i, c in enumerate((cycles.ccw, cycles.cw)):
         draws = bootstrap_counts(c.n, bootstrap_n, rng)
         held = draws @ c.valid  # cycles holding data at each point, per resample
-        prior = None if c.complete else held / c.n
         amplitude = min(main.amp_x[i], main.amp_y[i])
-        tol = max(irls["tol"], _BOOTSTRAP_TOLERANCE * u_pairs_rad * amplitude)
-        fits = []
+        tol = max(irls["tol"], _BOOTSTRAP_TOLERANCE * u_pairs_rad * amplitude)  # NaN u: tol
         for values, fit, mean in ((c.x, main.x, mean_fit.mean_x), (c.y, main.y, mean_fit.mean_y)):
-            rows = draws @ np.where(c.valid, values, 0.0) / np.maximum(held, 1)
-            fits.append(
-                fit_newton(
-                    exog,
-                    rows,
-                    first_order_params(exog, fit, i, norm, rows - mean[i]),
-                    norm,
-                    prior_weights=prior,
-                    newton_tol=tol if np.isfinite(tol) else None,
-                    **irls,
-                )[0]
-            )
-        theta_x, theta_y = circle_phases(*fits)
-        out.append(wrap_angle(theta_y - theta_x))
-    return np.array(out)
+            resampled = draws @ np.where(c.valid, values, 0.0) / np.maximum(held, 1)
+            rows.append(resampled)
+            starts.append(first_order_params(exog, fit, i, norm, resampled - mean[i]))
+            priors.append(held / c.n)
+            tols.append(np.full(bootstrap_n, tol))
+    complete = cycles.ccw.complete and cycles.cw.complete
+    params, _ = fit_newton(
+        exog,
+        np.concatenate(rows),
+        np.concatenate(starts),
+        norm,
+        prior_weights=None if complete else np.concatenate(priors),
+        newton_tol=np.concatenate(tols),
+        **irls,
+    )
+    params = params.reshape(2, 2, bootstrap_n, -1)  # direction, axis, resample
+    theta_x, theta_y = circle_phases(params[:, 0].reshape(-1, 3), params[:, 1].reshape(-1, 3))
+    return wrap_angle(theta_y - theta_x).reshape(2, bootstrap_n)
