@@ -308,7 +308,7 @@ def _lowpass_reference(data, cutoff_hz, order, sample_rate_hz, breaks=()):
 
 @pytest.mark.parametrize("shape", [(5000,), (5000, 2), (5000, 3)])
 @pytest.mark.parametrize("order", [1, 4])
-def test_lowpass_channel_by_channel_is_bit_for_bit(shape, order):
+def test_lowpass_of_all_channels_at_once_is_bit_for_bit(shape, order):
     data = np.random.default_rng(order).standard_normal(shape)[:, ...]
     breaks = [7, 1200, 3000]  # a stretch too short to filter, and three filtered
     fast = filter_module.lowpass(data, 20.0, order, 1000.0, breaks)
