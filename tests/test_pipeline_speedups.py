@@ -484,8 +484,8 @@ def test_analysis_equals_the_reference_paths(name, reference_paths):
     assert fast.period_s == pytest.approx(ref.period_s, rel=1e-12)
     assert fast.u_squareness_rad == pytest.approx(ref.u_squareness_rad, rel=1e-6)
     u_boot = ref.u_squareness_bootstrap_rad
-    # Newton solves each resample to 1e-3 of u, IRLS to 1e-10 m/s^2.
-    assert fast.u_squareness_bootstrap_rad == pytest.approx(u_boot, rel=1e-4)
+    # Newton solves each resample to about 2e-4 of u, IRLS to 1e-10 m/s^2.
+    assert fast.u_squareness_bootstrap_rad == pytest.approx(u_boot, rel=1e-3)
     assert fast.u_eps_c_rad == pytest.approx(ref.u_eps_c_rad, rel=1e-6)
     assert fast.crb_rad == pytest.approx(crb, rel=1e-9)
     assert fast.noise_density_m_s2_rthz == pytest.approx(ref.noise_density_m_s2_rthz, rel=1e-9)

@@ -47,9 +47,10 @@ def fit_newton(
     prior_weights : ndarray, shape (n_fits, n_obs), optional
         Inverse relative variance of each observation, 0 where it holds no data
         (as in ``fit_irls``). All ones if None.
-    newton_tol : float or ndarray of shape (n_fits,), optional
-        Largest change of every coefficient in the last Newton step, for all
-        rows or each; ``irls``'s ``tol`` if None. [unit of endog]
+    newton_tol : float or ndarray of shape (n_fits,) or (n_fits, n_params), optional
+        Largest change of the coefficients in the last Newton step: for all
+        rows, each row, or each coefficient of each row (inf: not watched);
+        ``irls``'s ``tol`` if None. [unit of endog]
     newton_steps : int
         Newton steps before a row is handed to IRLS.
     **irls
@@ -69,7 +70,8 @@ def fit_newton(
     start = np.broadcast_to(np.asarray(start_params, dtype=np.float64), (endog.shape[0], p))
     params = start.copy()
     tol = irls.get("tol", 1e-8) if newton_tol is None else newton_tol
-    tol = np.broadcast_to(np.asarray(tol, dtype=np.float64), endog.shape[:1])
+    tol = np.asarray(tol, dtype=np.float64)
+    tol = np.broadcast_to(tol[:, None] if tol.ndim == 1 else tol, (endog.shape[0], p))
     prior = None if prior_weights is None else np.asarray(prior_weights, dtype=np.float64)
     if prior is not None:
         present = prior > 0
@@ -102,7 +104,7 @@ def fit_newton(
         step = np.linalg.solve(hessian, (psi @ exog)[..., None])[..., 0]
         step *= np.where(usable, scale, 0.0)[:, None]
         params[idx] += step
-        active[idx] = usable & np.any(np.abs(step) > tol[idx, None], axis=-1)
+        active[idx] = usable & np.any(np.abs(step) > tol[idx], axis=-1)
     rest = np.flatnonzero(~newton | active)
     if rest.size:
         options = {k: v for k, v in irls.items() if k != "covariance"}
