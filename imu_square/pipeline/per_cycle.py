@@ -140,26 +140,31 @@ def _bootstrap(cycles, mean_fit, norm, irls, bootstrap_n, seed, u_pairs_rad):
     exog = sine_design(cycles.phi_grid)
     main = mean_fit.fit
     rng = np.random.default_rng(seed)
-    rows, starts, priors, tols = [], [], [], []  # CCW x, CCW y, CW x, CW y: one batch
+    complete = cycles.ccw.complete and cycles.cw.complete
+    n_grid = cycles.phi_grid.size
+    rows = np.empty((2, 2, bootstrap_n, n_grid))  # direction, axis, resample: one batch
+    prior = None if complete else np.empty_like(rows)
+    starts = np.empty((2, 2, bootstrap_n, 3))
+    tol = np.full((2, 2, bootstrap_n, 3), np.inf)  # the offset is not watched: only phases
     for i, c in enumerate((cycles.ccw, cycles.cw)):
         draws = bootstrap_counts(c.n, bootstrap_n, rng)
         held = draws @ c.valid  # cycles holding data at each point, per resample
         amplitude = min(main.amp_x[i], main.amp_y[i])
-        tol = max(irls["tol"], _BOOTSTRAP_TOLERANCE * u_pairs_rad * amplitude)  # NaN u: tol
-        for values, fit, mean in ((c.x, main.x, mean_fit.mean_x), (c.y, main.y, mean_fit.mean_y)):
-            resampled = draws @ np.where(c.valid, values, 0.0) / np.maximum(held, 1)
-            rows.append(resampled)
-            starts.append(first_order_params(exog, fit, i, norm, resampled - mean[i]))
-            priors.append(held / c.n)
-            tols.append(np.tile([np.inf, tol, tol], (bootstrap_n, 1)))  # the phase's two
-    complete = cycles.ccw.complete and cycles.cw.complete
+        tol[i, ..., 1:] = max(irls["tol"], _BOOTSTRAP_TOLERANCE * u_pairs_rad * amplitude)
+        fits = ((c.x, main.x, mean_fit.mean_x), (c.y, main.y, mean_fit.mean_y))
+        for k, (values, fit, mean) in enumerate(fits):
+            np.matmul(draws, np.where(c.valid, values, 0.0), out=rows[i, k])
+            rows[i, k] /= np.maximum(held, 1)
+            starts[i, k] = first_order_params(exog, fit, i, norm, rows[i, k] - mean[i])
+            if prior is not None:
+                np.divide(held, c.n, out=prior[i, k])
     params, _ = fit_newton(
         exog,
-        np.concatenate(rows),
-        np.concatenate(starts),
+        rows.reshape(-1, n_grid),
+        starts.reshape(-1, 3),
         norm,
-        prior_weights=None if complete else np.concatenate(priors),
-        newton_tol=np.concatenate(tols),
+        prior_weights=None if prior is None else prior.reshape(-1, n_grid),
+        newton_tol=tol.reshape(-1, 3),
         **irls,
     )
     params = params.reshape(2, 2, bootstrap_n, -1)  # direction, axis, resample
