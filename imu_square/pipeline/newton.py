@@ -155,7 +155,9 @@ def first_order_params(exog, fit, row, norm, change):
     params = np.broadcast_to(fit.params[row], (change.shape[0], exog.shape[1]))
     if not _positive_definite(hessian[None])[0]:
         return params.copy()
-    gradient = np.where(prior > 0, change, 0.0) @ (exog * dpsi[:, None])
+    if not np.all(prior > 0):
+        change = np.where(prior > 0, change, 0.0)  # NaN where the fit held no data
+    gradient = change @ (exog * dpsi[:, None])
     return params + np.linalg.solve(hessian, gradient.T).T
 
 
