@@ -1,4 +1,4 @@
-"""Robust fits near a known solution by Newton's method: the bootstrap's solver.
+"""Robust fits near a known solution by Newton's method: single cycles, resamples, stage 2.
 
 :func:`imu_square.pipeline.fit.fit_irls` solves the M-estimate's equations
 ``sum_i sqrt(p_i) psi(z_i) x_i = 0``, ``z_i = sqrt(p_i) r_i / s``, ``s`` the

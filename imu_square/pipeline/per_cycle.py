@@ -5,8 +5,8 @@ each pair gives its own ``theta_y - theta_x`` (the mean of its two cycles),
 servo mismatch and ``eps_c``. Their scatter is the type A uncertainty, and
 their times (and temperatures) let the monitor regress the drift within a
 night. The bootstrap resamples whole cycles within each direction and refits
-the means. All rows share one phi grid, so the cycles are solved as one
-vectorised IRLS batch and the resamples as one Newton batch
+the means. All rows share one phi grid, so the cycles (both axes) are solved
+as one vectorised batch and the resamples as another, by Newton's method
 (:mod:`imu_square.pipeline.newton`), each row started from its direction's
 fit of the mean. Grid points inside bridged gaps hold no data and are left
 out of every fit (a resampled mean weighs each point by the cycles holding
