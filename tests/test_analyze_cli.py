@@ -121,3 +121,16 @@ def test_a_run_given_twice_counts_once(tmp_path, capsys):
         for second in (good, copy)
     ]
     assert "after 2 runs" not in err
+
+
+@pytest.mark.parametrize("n", ["1", "-5"])
+def test_a_bootstrap_of_fewer_than_two_resamples_is_refused(tmp_path, capsys, n):
+    # One resample has no spread (numpy's "Degrees of freedom <= 0" warnings and a NaN
+    # u); a negative count used to skip the bootstrap silently.
+    path, _ = _write(tmp_path, "run.mcap")
+    assert main(["analyze", str(path), "--bootstrap", n]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.strip().splitlines() == [
+        f"imu-square analyze: error: bootstrap_n must be 0 (no bootstrap) or at least 2, got {n}"
+    ]

@@ -174,3 +174,19 @@ def test_first_order_start_is_near_the_resamples_estimate():
     assert np.median(missed / moved) < 0.4
     assert np.mean(missed < moved) > 0.9
     assert np.median(moved) > 1e-5  # resampling moved the fits by many tolerances
+
+
+@pytest.mark.parametrize("shape", ["(n_obs,)", "(1, n_obs)"])
+def test_prior_weights_shared_by_all_rows_as_in_irls(shape):
+    """One row of prior weights for every fit, as fit_irls takes it (a mean trace's gaps)."""
+    rows, start = _resampled_means(seed=6, n_boot=16)
+    rows[0] = EXOG @ start + np.random.default_rng(6).normal(0, 2e-5, PHI.size)  # converges first
+    prior = np.ones(PHI.size)
+    prior[100:140] = 0.0
+    prior[300:310] = 0.5
+    rows[:, 100:140] = np.nan  # never read
+    shared = prior if shape == "(n_obs,)" else prior[None]
+    ours, handed = fit_newton(EXOG, rows, start, TUKEY, prior_weights=shared, **IRLS)
+    ref = fit_irls(EXOG, rows, TUKEY, start_params=start, prior_weights=shared, **IRLS)
+    assert handed == 0
+    assert_allclose(ours, ref.params, rtol=0, atol=1e-9)

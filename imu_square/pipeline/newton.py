@@ -44,7 +44,7 @@ def fit_newton(
         rows resample). [unit of endog]
     norm : statsmodels.robust.norms.RobustNorm
         The robust norm.
-    prior_weights : ndarray, shape (n_fits, n_obs), optional
+    prior_weights : ndarray, shape (n_obs,) or (n_fits, n_obs), optional
         Inverse relative variance of each observation, 0 where it holds no data
         (as in ``fit_irls``). All ones if None.
     newton_tol : float or ndarray of shape (n_fits,) or (n_fits, n_params), optional
@@ -72,7 +72,9 @@ def fit_newton(
     tol = irls.get("tol", 1e-8) if newton_tol is None else newton_tol
     tol = np.asarray(tol, dtype=np.float64)
     tol = np.broadcast_to(tol[:, None] if tol.ndim == 1 else tol, (endog.shape[0], p))
-    prior = None if prior_weights is None else np.asarray(prior_weights, dtype=np.float64)
+    prior = None
+    if prior_weights is not None:  # one row for all fits too, as in fit_irls
+        prior = np.broadcast_to(np.asarray(prior_weights, dtype=np.float64), endog.shape)
     if prior is not None:
         present = prior > 0
         endog = np.where(present, endog, 0.0)

@@ -39,7 +39,7 @@ class AnalysisOptions:
     grid_points : int
         Points of the common phi grid per cycle.
     bootstrap_n : int
-        Bootstrap resamples over cycles (0 to skip).
+        Bootstrap resamples over cycles (0 to skip, else at least 2).
     seed : int
         Seed of the bootstrap.
     min_cycles : int
@@ -69,6 +69,10 @@ class AnalysisOptions:
     def __post_init__(self):
         if not 0.0 <= self.gain_tolerance < 0.5:
             raise AnalysisError(f"gain_tolerance must be in [0, 0.5), got {self.gain_tolerance!r}")
+        if self.bootstrap_n == 1 or self.bootstrap_n < 0:  # one resample has no spread
+            raise AnalysisError(
+                f"bootstrap_n must be 0 (no bootstrap) or at least 2, got {self.bootstrap_n!r}"
+            )
         if not 0.0 < self.coverage_probability < 1.0:
             raise AnalysisError(
                 f"coverage_probability must be in (0, 1), got {self.coverage_probability!r}"
