@@ -49,6 +49,8 @@ def test_relative_paths_are_taken_from_the_file(tmp_path):
         (MINIMAL + "[alarms]\nfalse_alarm_nights = 2\n", r"false_alarm_nights must be in \[10"),
         (MINIMAL + "[alarms]\nstep_um_per_m = 0\n", r"step_um_per_m must be in \(0, 10000\]"),
         (MINIMAL + "[analysis]\ncutoff = 4\n", r"\[analysis\] has unknown field 'cutoff'"),
+        (MINIMAL + "[analysis]\nbootstrap = 1\n", r"\[analysis\] bootstrap must be 0 \(no boo"),
+        (MINIMAL + "[analysis]\nbootstrap = -2\n", r"\[analysis\] bootstrap must be a whole"),
         (MINIMAL + "[monitor]\n", r"not valid TOML"),
         ('[monitor]\nmachine_id = "a/b"\n', r"machine_id must be 1-64 letters"),
         ('[monitor]\nmachine_id = ".."\n', r"starting with a letter or digit, got '\.\.'"),

@@ -162,6 +162,14 @@ def test_dry_run_lists_and_bad_paths_are_one_line(archive, capsys):
     assert main(["replay", "--config", str(archive / "monitor.toml"), "--jobs", "0",
                  str(archive / "archive")]) == 2  # fmt: skip
     assert "--jobs must be a whole number >= 1, got 0" in capsys.readouterr().err
+    bad = archive / "one_resample.toml"
+    bad.write_text("[analysis]\nbootstrap = 1\n")
+    argv = ["replay", "--config", str(archive / "monitor.toml"), "--settings", str(bad),
+            "--into", str(archive / "never.db"), str(archive / "archive")]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{bad}: [analysis] bootstrap must be 0 (no bootstrap) or a whole number" in err
+    assert len(err.strip().splitlines()) == 1 and not (archive / "never.db").exists()
 
 
 @pytest.mark.slow

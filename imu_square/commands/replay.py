@@ -60,11 +60,7 @@ def _settings(path):
     if extra:
         raise MonitorConfigError(f"{path}: unknown section [{extra[0]}]; allowed: ['analysis']")
     t = Table(doc.get("analysis", {}), "[analysis]", ("cutoff_hz", "order", "bootstrap"), path)
-    return AnalysisSettings(
-        cutoff_hz=t.number("cutoff_hz", 4.0, 0.0, 1000.0, lo_open=True),
-        order=t.integer("order", 1, 1, 8),
-        bootstrap=t.integer("bootstrap", 200, 0, 10_000),
-    )
+    return AnalysisSettings.from_table(t)
 
 
 class _Progress:

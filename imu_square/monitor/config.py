@@ -147,12 +147,32 @@ class AnalysisSettings:
     order : int
         Low-pass order.
     bootstrap : int
-        Bootstrap resamples (0 to skip).
+        Bootstrap resamples (0 to skip, else at least 2).
     """
 
     cutoff_hz: float = 4.0
     order: int = 1
     bootstrap: int = 200
+
+    @classmethod
+    def from_table(cls, table):
+        """Read ``cutoff_hz``, ``order`` and ``bootstrap`` from an ``[analysis]`` table.
+
+        Parameters
+        ----------
+        table : imu_square.monitor.fields.Table
+            The ``[analysis]`` table of a monitor or settings file.
+
+        Returns
+        -------
+        AnalysisSettings
+        """
+        cutoff_hz = table.number("cutoff_hz", 4.0, 0.0, 1000.0, lo_open=True)
+        order = table.integer("order", 1, 1, 8)
+        bootstrap = table.integer("bootstrap", 200, 0, 10_000)
+        if bootstrap == 1:  # one resample has no spread
+            table.fail("bootstrap", "0 (no bootstrap) or a whole number in [2, 10000]", 1)
+        return cls(cutoff_hz=cutoff_hz, order=order, bootstrap=bootstrap)
 
     def options(self):
         """The pipeline's :class:`~imu_square.pipeline.options.AnalysisOptions`."""
@@ -318,12 +338,7 @@ def monitor_from_mapping(doc, path):
     )
     prog = table("program", ("file",))
     program = prog.path("file") if prog.text("file", "", empty=True) else None
-    ana = table("analysis", ("cutoff_hz", "order", "bootstrap"))
-    analysis = AnalysisSettings(
-        cutoff_hz=ana.number("cutoff_hz", 4.0, 0.0, 1000.0, lo_open=True),
-        order=ana.integer("order", 1, 1, 8),
-        bootstrap=ana.integer("bootstrap", 200, 0, 10_000),
-    )
+    analysis = AnalysisSettings.from_table(table("analysis", ("cutoff_hz", "order", "bootstrap")))
     alarm = table("alarms", ("false_alarm_nights", "step_um_per_m", "monte_carlo_nights"))
     alarms = AlarmSettings(
         false_alarm_nights=alarm.number("false_alarm_nights", 730.0, 10.0, 1e6),
