@@ -14,8 +14,13 @@ steps.
 Newton needs a start near the solution and a Hessian ``sum p_i psi'(z_i) x_i
 x_i^T`` that stays positive definite (Tukey's ``psi'`` is negative beyond
 ``c / sqrt(5)``). A row that loses either, or has not converged in
-``newton_steps``, is handed to ``fit_irls`` from its start, so every row ends
-at the estimate IRLS would give.
+``newton_steps``, is handed to ``fit_irls`` from its start. Tukey's objective
+is not convex, so two solvers from one start may still end at different
+roots: on 300 hard rows of 256-512 points (up to 35 % outliers, starts up to
+10 sd off) Newton and IRLS agreed to 1.2e-10; with 40 % of the points shifted
+alike, or a few dozen points, the scale can grow under Newton's steps and
+settle elsewhere. The pipeline's rows (512 points, started from a fit of
+their own data's average) are far from that.
 """
 
 import numpy as np
