@@ -309,7 +309,9 @@ def flicker_fit(residuals, sample_rate_hz, circle_frequency_hz, max_frequency_hz
             step /= 2
         else:
             break  # no step descends: at the optimum, to rounding
-        coef, nll = coef + step, trial
+        coef, gain, nll = coef + step, nll - trial, trial
+        if gain <= 1e-12 * abs(nll):
+            break  # the likelihood has settled
     model = design @ coef
     # Sandwich covariance: the Welch bins are not independent (adjacent Hann bins
     # correlate by 4/9, overlapping segments by 1/36). Taken as independent, the
