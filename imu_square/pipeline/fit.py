@@ -21,10 +21,10 @@ Stage 2 of the paper fits the cross terms ``C_y cos(phi + pi/2 - theta_y)``
 (in ``a_x``) and ``C_x cos(phi - theta_x)`` (in ``a_y``) to the stage-1
 residuals and reads the sensor rotation from ``C = A tan(eps_c)`` (Eq. 3).
 :func:`imu_square.pipeline.stage2.fit_cross_terms` implements it as written,
-but it is degenerate: both stages use the same frequency, so stage 1 has already absorbed every
-component at ``omega`` and the stage-2 amplitudes are zero up to noise
-whatever ``eps_c`` is (a rotation of a perfect circle is indistinguishable
-from a time shift). The pipeline therefore estimates ``eps_c`` from the mean
+but it is degenerate: both stages use the same frequency, so stage 1 has
+already absorbed every component at ``omega`` and the stage-2 amplitudes are
+zero up to noise whatever ``eps_c`` is (a rotation of a perfect circle is
+indistinguishable from a time shift). The pipeline therefore estimates ``eps_c`` from the mean
 phase ``(theta_x + theta_y) / 2`` with ``phi`` anchored at the middle of each
 block's motion (:mod:`imu_square.pipeline.rotation`, ``docs/model.md``).
 
