@@ -178,7 +178,16 @@ def test_an_interrupted_replay_picks_up_and_loses_nothing(archive, tmp_path):
     script = Path(sys.executable).with_name("imu-square")
     argv = [str(script), "replay", "--config", str(archive / "monitor.toml"),
             str(archive / "archive"), "--into", str(into), "--jobs", "2", "--json"]  # fmt: skip
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    # The replay at the lowest priority: a file takes about 10 ms, so a test process that
+    # waited for the CPU behind the replay's three processes once saw its SIGINT arrive
+    # after the last file. At nice 19 the replay yields to the test whenever it is ready.
+    proc = subprocess.Popen(
+        argv,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+        preexec_fn=lambda: os.nice(19),
+    )
     done = 0
     for line in proc.stdout:  # wait until some files are in, then interrupt
         done += json.loads(line).get("event") == "file"
