@@ -172,21 +172,30 @@ def test_dry_run_lists_and_bad_paths_are_one_line(archive, capsys):
     assert len(err.strip().splitlines()) == 1 and not (archive / "never.db").exists()
 
 
+def _interruptible_and_yielding():
+    """In the replay's process, before it starts: Ctrl-C as at a terminal, lowest priority.
+
+    A shell without job control starts background jobs with SIGINT ignored, which
+    their children inherit: pytest run with ``&`` would hand that on and the replay
+    would never see the test's SIGINT. At nice 19 the replay (about 10 ms a file)
+    yields the CPU to the test, whose SIGINT then comes before the last file.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    os.nice(19)
+
+
 @pytest.mark.slow
 def test_an_interrupted_replay_picks_up_and_loses_nothing(archive, tmp_path):
     into = tmp_path / "interrupted.db"
     script = Path(sys.executable).with_name("imu-square")
     argv = [str(script), "replay", "--config", str(archive / "monitor.toml"),
             str(archive / "archive"), "--into", str(into), "--jobs", "2", "--json"]  # fmt: skip
-    # The replay at the lowest priority: a file takes about 10 ms, so a test process that
-    # waited for the CPU behind the replay's three processes once saw its SIGINT arrive
-    # after the last file. At nice 19 the replay yields to the test whenever it is ready.
     proc = subprocess.Popen(
         argv,
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
-        preexec_fn=lambda: os.nice(19),
+        preexec_fn=_interruptible_and_yielding,
     )
     done = 0
     for line in proc.stdout:  # wait until some files are in, then interrupt
