@@ -94,11 +94,10 @@ def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0
     which = np.repeat([0, 1], [ccw.n, cw.n])
     complete = ccw.complete and cw.complete
     exog = sine_design(cycles.phi_grid)
-    prior = None if complete else np.concatenate([ccw.valid, cw.valid]).astype(float)
-    if prior is not None:
-        prior = np.concatenate([prior, prior])
     start = np.concatenate([main.x.params[which], main.y.params[which]])
     rows = np.concatenate([ccw.x, cw.x, ccw.y, cw.y])  # x and y in one batch
+    valid = [ccw.valid, cw.valid, ccw.valid, cw.valid]
+    prior = None if complete else np.concatenate(valid).astype(float)
     params, _ = fit_newton(exog, rows, start, norm, prior_weights=prior, **irls)
     theta_x, theta_y = circle_phases(params[: which.size], params[which.size :])
     sq = wrap_angle(theta_y - theta_x)
