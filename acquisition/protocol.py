@@ -5,7 +5,7 @@ Two modes carry the same three messages (header, sample block, marker):
 - **binary** (:mod:`acquisition.framing`): COBS frames delimited by 0x00
   before *and* after, each ``version, type, body, CRC-32``, little-endian,
   samples as int24 counts;
-- **line** (:mod:`acquisition.lines`): ASCII lines ``seq,ax,ay,az[,temp][*hhhh]``
+- **line** (:mod:`acquisition.line_mode`): ASCII lines ``seq,ax,ay,az[,temp][*hhhh]``
   for hobby boards, with ``#imu-square,...`` header and ``#marker,...`` lines.
 
 The host asks for a header by writing :data:`REQUEST_HEADER`. The byte
@@ -33,7 +33,7 @@ from acquisition.framing import (
     is_header_chunk,
     link_load,
 )
-from acquisition.lines import (
+from acquisition.line_mode import (
     MAX_LINE,
     PREFIX_HEADER,
     encode_block_lines,

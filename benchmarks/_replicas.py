@@ -16,7 +16,7 @@ from imu_square.io.recording import SensorInfo
 from imu_square.pipeline.gravity import analyze_feeds, separate_gravity
 from imu_square.pipeline.squareness import analyze
 from imu_square.simulate import simulate_run
-from imu_square.simulate.noise import digitise, sensor_noise
+from imu_square.simulate.sensor_noise import digitise, sensor_noise
 
 
 def noiseless_run(program, machine, sensor):

@@ -73,9 +73,9 @@ from imu_square.io.recording import SensorInfo
 from imu_square.program import TestProgram
 from imu_square.simulate import simulate_run
 from imu_square.simulate.machine import MachineModel
-from imu_square.simulate.noise import sensor_noise
 from imu_square.simulate.presets import with_effects
 from imu_square.simulate.sensor import SensorModel
+from imu_square.simulate.sensor_noise import sensor_noise
 from imu_square.units import URAD
 
 LOW_D = 1e-6
@@ -227,8 +227,8 @@ def _reference_analyze(recording, options, fit_kwargs):
 
     from imu_square.pipeline.align import cycle_traces
     from imu_square.pipeline.filter import circle_cutoff_hz, lowpass, settling_time_s
-    from imu_square.pipeline.fit import sine_design
     from imu_square.pipeline.segment import segment
+    from imu_square.pipeline.sine_fit import sine_design
 
     prog = recording.program
     t = recording.time_s

@@ -12,7 +12,7 @@ Acceptance (issue 9, section 1):
 - uncertainty: at the paper's sensor noise (7 ug/sqrt(Hz)), the standard
   deviation of the separated squareness over ``--seeds`` runs matches the
   closed form ``sqrt(sum c_i^2 sigma_i^2)``, ``sigma_i = sqrt(2) d / (A_i
-  sqrt(T_i)) / sqrt(e)`` (``imu_square.planner.sigma_run``, with the
+  sqrt(T_i)) / sqrt(e)`` (``imu_square.program.planner.sigma_run``, with the
   estimator's measured efficiency ``e``) within 10 %.
 
 The machine has servo lags (2.0 and 2.5 ms), squareness, and the sensor is
@@ -39,8 +39,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _replicas import estimate, noiseless_run, replica, spread
 
 from imu_square.pipeline.squareness import AnalysisOptions
-from imu_square.planner import ESTIMATOR_EFFICIENCY, SensorSpec, sigma_run
 from imu_square.program import TestProgram
+from imu_square.program.planner import ESTIMATOR_EFFICIENCY, SensorSpec, sigma_run
 from imu_square.simulate import Geometry, MachineModel, SensorModel
 from imu_square.units import UG, URAD
 

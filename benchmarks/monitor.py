@@ -57,13 +57,13 @@ import numpy as np
 from scipy import stats
 
 from imu_square.errors import AnalysisError
-from imu_square.monitor.alarms import (
+from imu_square.monitor.stats.alarms import (
     NIGHTS_PER_YEAR,
     baseline_effect,
     design_alarms,
     to_design_law,
 )
-from imu_square.monitor.charts import (
+from imu_square.monitor.stats.charts import (
     CHARTS,
     ChartLimits,
     NightSampler,
@@ -168,7 +168,7 @@ def _pool_check(pool):
 class NightBootstrap:
     """Machines drawn from a pool of real nights: a baseline of N nights, then other nights.
 
-    ``draw`` follows :class:`imu_square.monitor.charts.NightSampler`: the
+    ``draw`` follows :class:`imu_square.monitor.stats.charts.NightSampler`: the
     change ``mean`` (in rad, night by night, the last value held) is added
     to each night's squareness. A pool of a few hundred nights resolves the
     charts that average (EWMA, CUSUM) but not the Shewhart's far tail: one

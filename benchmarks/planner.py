@@ -4,7 +4,7 @@ Acceptance (issue 9, section 2): for 6 plans spread over sensors (7 to 100
 ug/sqrt(Hz), white and 1/f noise, 500 and 1000 Hz), machines (0.1 to 5 m/s^2,
 0.16 to 1.8 Hz, radii 15 to 100 mm), times (2 to 10 min), baselines and
 confidences, and one or two feeds, the predicted
-standard deviation of one run (``imu_square.planner``) is compared with the
+standard deviation of one run (``imu_square.program.planner``) is compared with the
 standard deviation of ``--runs`` simulated runs (40 by default), and the runs'
 mean with the truth: unbiased within 1 urad plus 3 standard errors. The
 machine has servo lags (2.0 and 2.5 ms), machine squareness, a turned sensor
@@ -40,7 +40,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _replicas import estimate, noiseless_run, replica, spread
 
 from imu_square.pipeline.squareness import AnalysisOptions
-from imu_square.planner import (
+from imu_square.program import TestProgram
+from imu_square.program.planner import (
     ESTIMATOR_EFFICIENCY,
     Goal,
     Limits,
@@ -48,7 +49,6 @@ from imu_square.planner import (
     plan_test,
     sigma_run,
 )
-from imu_square.program import TestProgram
 from imu_square.simulate import Geometry, MachineModel, SensorModel
 from imu_square.units import UG, URAD, G
 

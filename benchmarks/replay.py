@@ -32,8 +32,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 from imu_square.allocator import tune_allocator
 from imu_square.io.mcap import write_mcap
 from imu_square.monitor.config import AnalysisSettings
+from imu_square.monitor.history.store import open_history
 from imu_square.monitor.replay import ReplayJob, run_dask, run_local, store_outcome
-from imu_square.monitor.store import open_history
 from imu_square.program import read_program
 from imu_square.simulate import data_path, read_machine, read_sensor, simulate_run
 

@@ -31,8 +31,8 @@ import sys
 import time
 
 from imu_square.errors import ImuSquareError
-from imu_square.monitor.rows import EvaluationRow, RunRow
-from imu_square.monitor.store import open_history
+from imu_square.monitor.history.rows import EvaluationRow, RunRow
+from imu_square.monitor.history.store import open_history
 
 MACHINE = "mill-7"
 SETTINGS = {"cutoff_hz": 4.0, "norm": "tukey", "grid_points": 512}

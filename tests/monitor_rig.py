@@ -13,7 +13,7 @@ from datetime import UTC, datetime, timedelta
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
-from imu_square.monitor.store import open_history
+from imu_square.monitor.history.store import open_history
 from imu_square.program import program_from_mapping
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.machine import MachineModel

@@ -25,7 +25,7 @@ import uuid
 from pathlib import Path
 from urllib.parse import quote
 
-from imu_square.monitor.postgres_backend import find_pg_tool
+from imu_square.monitor.history.postgres import find_pg_tool
 
 _SERVER = None
 _FAILED = None

@@ -24,7 +24,7 @@ from imu_square.pipeline.gravity import analyze_feeds, separate_gravity
 from imu_square.pipeline.squareness import AnalysisOptions
 from imu_square.program import TestProgram
 from imu_square.simulate import Geometry, MachineModel, SensorModel, simulate_run
-from imu_square.simulate.noise import sensor_noise
+from imu_square.simulate.sensor_noise import sensor_noise
 from imu_square.units import URAD
 
 # The paper's circle (r = 100 mm) at 6000 and 3000 mm/min: v^2/r = 0.1 and 0.025

@@ -12,12 +12,12 @@ import pytest
 from history_child import MACHINE, run_for
 
 from imu_square.errors import HistoryError
-from imu_square.monitor import schema
-from imu_square.monitor.encoding import canonical_json
-from imu_square.monitor.postgres_backend import PostgresBackend
-from imu_square.monitor.rows import EvaluationRow
-from imu_square.monitor.sqlite_backend import SqliteBackend
-from imu_square.monitor.store import is_postgres_url, open_history
+from imu_square.monitor.history import schema
+from imu_square.monitor.history.encoding import canonical_json
+from imu_square.monitor.history.postgres import PostgresBackend
+from imu_square.monitor.history.rows import EvaluationRow
+from imu_square.monitor.history.sqlite import SqliteBackend
+from imu_square.monitor.history.store import is_postgres_url, open_history
 
 CHILD = Path(__file__).with_name("history_child.py")
 JSON_FIELDS = ("settings", "quality", "warnings", "per_cycle", "result")

@@ -22,8 +22,8 @@ import pytest
 from history_child import MACHINE, index_of, run_for
 
 from imu_square.errors import HistoryError
-from imu_square.monitor import schema
-from imu_square.monitor.store import open_history
+from imu_square.monitor.history import schema
+from imu_square.monitor.history.store import open_history
 
 CHILD = Path(__file__).with_name("history_child.py")
 # SIGKILLs per backend: at least 50 on SQLite (issue 11); a killed PostgreSQL
@@ -259,7 +259,7 @@ def test_a_read_only_location_is_one_line(tmp_path):
         code = (
             "import sys\n"
             "from imu_square.errors import HistoryError\n"
-            "from imu_square.monitor.store import open_history\n"
+            "from imu_square.monitor.history.store import open_history\n"
             "for name in sys.argv[1:]:\n"
             "    try:\n"
             "        open_history(name)\n"

@@ -20,10 +20,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from imu_square.errors import HistoryError, ImuSquareError
-from imu_square.monitor import store
-from imu_square.monitor.encoding import canonical_json
-from imu_square.monitor.rows import RUN_FLOAT_FIELDS
-from imu_square.monitor.store import (
+from imu_square.monitor.history import store
+from imu_square.monitor.history.encoding import canonical_json
+from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS
+from imu_square.monitor.history.store import (
     EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
@@ -522,7 +522,7 @@ def _python(code):
 def test_the_sqlite_path_never_imports_psycopg(tmp_path):
     done = _python(
         "import sys\n"
-        "from imu_square.monitor.store import open_history\n"
+        "from imu_square.monitor.history.store import open_history\n"
         f"with open_history({str(tmp_path / 'h.db')!r}) as h:\n"
         "    h.runs('m')\n"
         "assert 'psycopg' not in sys.modules, 'psycopg was imported'\n"
@@ -534,7 +534,7 @@ def test_a_url_without_psycopg_is_one_clear_line():
     done = _python(
         "import sys\n"
         "sys.modules['psycopg'] = None  # as if it were not installed\n"
-        "from imu_square.monitor.store import open_history\n"
+        "from imu_square.monitor.history.store import open_history\n"
         "open_history('postgresql://u:pw@db.example/history')\n"
     )
     assert done.returncode != 0

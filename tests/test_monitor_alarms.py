@@ -15,14 +15,14 @@ from numpy.testing import assert_allclose
 from scipy import special, stats
 
 from imu_square.errors import MonitorError
-from imu_square.monitor.alarms import (
+from imu_square.monitor.stats.alarms import (
     AlarmDesign,
     baseline_effect,
     design_alarms,
     evaluate,
     to_design_law,
 )
-from imu_square.monitor.arl import (
+from imu_square.monitor.stats.arl import (
     Cusum,
     Ewma,
     NightLaw,
@@ -32,7 +32,7 @@ from imu_square.monitor.arl import (
     solve_limit,
     solve_warning,
 )
-from imu_square.monitor.charts import (
+from imu_square.monitor.stats.charts import (
     ChartLimits,
     NightSampler,
     alarm_counts,

@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 
 from imu_square.errors import ConfigError, MonitorConfigError
-from imu_square.monitor.alert_config import AlertsConfig, RetryPolicy, alerts_from_mapping
-from imu_square.monitor.alert_types import DEFAULT_ALERT_STATES, STATES
+from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES
+from imu_square.monitor.alerts.config import AlertsConfig, RetryPolicy, alerts_from_mapping
 
 FULL = """
 [alerts]

@@ -14,9 +14,9 @@ from alert_servers import Hook, Mailbox, free_port
 
 import imu_square.monitor
 from imu_square.errors import ImuSquareError, MonitorError
-from imu_square.monitor.alert_config import alerts_from_mapping
-from imu_square.monitor.alert_types import make_alert, one_line
-from imu_square.monitor.alerts import deliver_pending, send_alerts
+from imu_square.monitor.alerts.alert import make_alert, one_line
+from imu_square.monitor.alerts.config import alerts_from_mapping
+from imu_square.monitor.alerts.send import deliver_pending, send_alerts
 
 # aiosmtpd counts only STARTTLS as TLS and warns when AUTH is allowed without it.
 pytestmark = pytest.mark.filterwarnings("ignore:Requiring AUTH while not requiring TLS")
@@ -214,9 +214,9 @@ def test_the_monitor_package_never_starts_a_process():
         r"\bsubprocess\b|os\.system|os\.popen|os\.exec|os\.spawn|shell\s*=|\beval\(|\bexec\("
     )
     folder = Path(imu_square.monitor.__file__).parent
-    sources = {p.name: p.read_text() for p in folder.glob("*.py")}
-    assert "alerts.py" in sources and "sink_webhook.py" in sources
-    pg = sources.pop("postgres_backend.py")
+    sources = {p.relative_to(folder).as_posix(): p.read_text() for p in folder.rglob("*.py")}
+    assert "alerts/send.py" in sources and "alerts/webhook.py" in sources
+    pg = sources.pop("history/postgres.py")
     assert {
         name: forbidden.findall(text) for name, text in sources.items() if forbidden.search(text)
     } == {}

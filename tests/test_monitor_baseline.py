@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from imu_square.monitor.baseline import (
+from imu_square.monitor.stats.baseline import (
     MIN_RUNS,
     REMOUNT_FLOOR_RAD,
     REMOUNT_SIGMAS,

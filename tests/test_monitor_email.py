@@ -5,8 +5,8 @@ import json
 import pytest
 from alert_servers import Mailbox, SilentServer, free_port, self_signed_cert, server_tls_context
 
-from imu_square.monitor.alert_config import alerts_from_mapping
-from imu_square.monitor.alerts import send_alerts
+from imu_square.monitor.alerts.config import alerts_from_mapping
+from imu_square.monitor.alerts.send import send_alerts
 
 pytest.importorskip("aiosmtpd", reason="aiosmtpd is in the test extra: pip install -e .[test]")
 # aiosmtpd counts only STARTTLS as TLS and warns when AUTH is allowed without it (SMTPS, plain).

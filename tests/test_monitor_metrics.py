@@ -14,9 +14,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from imu_square.errors import MonitorConfigError, MonitorError
-from imu_square.monitor import metrics
-from imu_square.monitor.alert_types import STATES
-from imu_square.monitor.metrics import (
+from imu_square.monitor.alerts.alert import STATES
+from imu_square.monitor.report import metrics
+from imu_square.monitor.report.metrics import (
     MetricsSnapshot,
     metrics_from_mapping,
     render_metrics,

@@ -22,8 +22,8 @@ from monitor_rig import ALPHA, SENSOR, START, copy_base, judge, make_base, night
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
+from imu_square.monitor.history.store import open_history
 from imu_square.monitor.schedule import EXIT_CODES
-from imu_square.monitor.store import open_history
 from imu_square.program import program_from_mapping
 from imu_square.simulate.run import simulate_run
 

@@ -16,7 +16,7 @@ import pytest
 from monitor_rig import ALPHA, judge, make_base, night
 
 from imu_square.cli import main
-from imu_square.monitor.report import SECTIONS
+from imu_square.monitor.report.html import SECTIONS
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 PROBE = """<script>

@@ -11,8 +11,8 @@ import time
 import pytest
 from alert_servers import Hook, SilentServer, free_port, self_signed_cert, server_tls_context
 
-from imu_square.monitor.alert_config import alerts_from_mapping
-from imu_square.monitor.alerts import deliver_pending, send_alerts
+from imu_square.monitor.alerts.config import alerts_from_mapping
+from imu_square.monitor.alerts.send import deliver_pending, send_alerts
 
 RECORD = {
     "machine_id": "mill-3",
@@ -289,8 +289,8 @@ def test_two_jobs_emptying_one_outbox_at_once_send_each_alert_once(tmp_path):
 
 KILLED_SENDER = """
 import sys
-from imu_square.monitor.alert_config import alerts_from_mapping
-from imu_square.monitor.alerts import send_alerts
+from imu_square.monitor.alerts.config import alerts_from_mapping
+from imu_square.monitor.alerts.send import send_alerts
 url, outbox = sys.argv[1:]
 config = alerts_from_mapping({"webhook": {"url": url, "timeout_s": 60}, "max_total_s": 60})
 send_alerts(config, {"n": 1}, machine_id="mill-3", state="alarm", verdict="v", outbox_dir=outbox)

@@ -9,7 +9,7 @@ import statsmodels.api as sm
 from numpy.testing import assert_allclose
 
 from imu_square.errors import ImuSquareWarning
-from imu_square.pipeline.fit import (
+from imu_square.pipeline.sine_fit import (
     fit_circle,
     fit_irls,
     robust_norm,

@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 from pipeline_synth import synth_circle
 
 from imu_square.pipeline.filter import bridge_gaps
-from imu_square.pipeline.fit import fit_irls, robust_norm, sine_design
+from imu_square.pipeline.sine_fit import fit_irls, robust_norm, sine_design
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.pipeline.uncertainty import cramer_rao
 from imu_square.program import TestProgram

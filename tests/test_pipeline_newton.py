@@ -9,9 +9,15 @@ from numpy.testing import assert_allclose
 from imu_square.io.mcap import read_mcap, write_mcap
 from imu_square.pipeline import per_cycle
 from imu_square.pipeline import squareness as sq
-from imu_square.pipeline.fit import circle_phases, fit_circle, fit_irls, robust_norm, sine_design
 from imu_square.pipeline.newton import _positive_definite, first_order_params, fit_newton
 from imu_square.pipeline.options import AnalysisOptions
+from imu_square.pipeline.sine_fit import (
+    circle_phases,
+    fit_circle,
+    fit_irls,
+    robust_norm,
+    sine_design,
+)
 from imu_square.pipeline.stage2 import fit_cross_terms
 from imu_square.pipeline.uncertainty import bootstrap_counts
 from imu_square.program import read_program

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from imu_square.io.recording import SensorInfo
-from imu_square.pipeline.noise import (
+from imu_square.pipeline.noise_floor import (
     NoiseSpectrum,
     _welch_correlations,
     flicker_fit,

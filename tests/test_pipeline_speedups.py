@@ -21,9 +21,7 @@ from scipy import signal
 
 from imu_square.pipeline import (
     align,
-    fit,
     newton,
-    noise,
     order_stats,
     per_cycle,
     quality,
@@ -33,6 +31,8 @@ from imu_square.pipeline import (
     trig,
 )
 from imu_square.pipeline import filter as filter_module
+from imu_square.pipeline import noise_floor as noise
+from imu_square.pipeline import sine_fit as fit
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import TestProgram
 from imu_square.simulate import SensorModel, simulate_run, with_effects

@@ -12,7 +12,8 @@ from imu_square.cli import main
 from imu_square.errors import ImuSquareError
 from imu_square.io.recording import SensorInfo
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
-from imu_square.planner import (
+from imu_square.program import TestProgram, read_program
+from imu_square.program.planner import (
     ESTIMATOR_EFFICIENCY,
     MIN_CYCLES,
     Goal,
@@ -24,9 +25,8 @@ from imu_square.planner import (
     servo_leak,
     sigma_run,
 )
-from imu_square.program import TestProgram, read_program
 from imu_square.simulate import MachineModel, SensorModel, simulate_run
-from imu_square.simulate.noise import sensor_noise
+from imu_square.simulate.sensor_noise import sensor_noise
 from imu_square.units import MM, MM_PER_MIN, UG, URAD, G
 
 PAPER = TestProgram()  # r = 100 mm, 6000 mm/min, 15 cycles each way

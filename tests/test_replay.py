@@ -20,8 +20,8 @@ from monitor_rig import ALPHA, SENSOR, START
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
+from imu_square.monitor.history.store import open_history
 from imu_square.monitor.replay import ReplayJob, expand_paths, run_dask
-from imu_square.monitor.store import open_history
 from imu_square.program import program_from_mapping
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.machine import MachineModel

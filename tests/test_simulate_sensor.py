@@ -10,7 +10,7 @@ from scipy.signal import welch
 
 from imu_square.program import TestProgram
 from imu_square.simulate import MachineModel, SensorModel, simulate_run, with_effects
-from imu_square.simulate.noise import sensor_noise
+from imu_square.simulate.sensor_noise import sensor_noise
 from imu_square.units import G
 
 PROGRAM = TestProgram(radius_m=0.05, feed_m_per_s=0.05, cycles_per_direction=2, dwell_s=0.3)

@@ -168,7 +168,7 @@ def run_single(args):
     """Record, analyse, write the result and the plot; compare with the truth when emulated."""
     from imu_square.errors import AnalysisError
     from imu_square.io.mcap import read_mcap
-    from imu_square.pipeline.plot import plot_results
+    from imu_square.pipeline.run_figure import plot_results
     from imu_square.pipeline.squareness import analyze
     from imu_square.program import read_program
     from imu_square.simulate import data_path
@@ -242,10 +242,10 @@ def run_monitor(args, config=None):
     """The monitor's night: record (or take a recording), judge, report, exit with the state."""
     from imu_square.errors import ImuSquareError
     from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.history.store import open_history
     from imu_square.monitor.night import judge_recording
-    from imu_square.monitor.outputs import write_night_outputs
+    from imu_square.monitor.publish import write_night_outputs
     from imu_square.monitor.schedule import EXIT_CODES
-    from imu_square.monitor.store import open_history
     from imu_square.program import read_program
     from imu_square.simulate import data_path
 
@@ -313,7 +313,7 @@ def run_monitor(args, config=None):
 def _check_night(config, out, recording):
     """Everything the night will need, checked before it starts: one line if not."""
     from imu_square.errors import ConfigError
-    from imu_square.monitor.outputs import ensure_folder
+    from imu_square.monitor.publish import ensure_folder
     from imu_square.simulate import read_machine, read_sensor
 
     ensure_folder(out, "data")

@@ -111,7 +111,7 @@ def run(args):
             doc["convergence"] = conv.to_json_dict()
             print(json.dumps(doc), file=sys.stdout, flush=True)
     if args.plot and results:
-        from imu_square.pipeline.plot import plot_results
+        from imu_square.pipeline.run_figure import plot_results
 
         title = str(last_path) if len(results) == 1 else f"{len(results)} runs"
         plot_results(results, args.plot, convergence([r.squareness_rad for r in results]), title)
@@ -149,7 +149,7 @@ def _run_separated(args, options, program):
         doc = {"recordings": list(args.recordings), **separation.to_json_dict()}
         print(json.dumps(doc), file=sys.stdout, flush=True)
     if args.plot:
-        from imu_square.pipeline.plot import plot_results
+        from imu_square.pipeline.run_figure import plot_results
 
         last = feeds[-1]
         title = f"{last.source} at {last.feed_mm_per_min:g} mm/min (the last of {len(feeds)} feeds)"

@@ -58,7 +58,7 @@ def register(sub):
 
 
 def _describe(row, design):
-    from imu_square.monitor.evaluate import iso
+    from imu_square.monitor.verdict import iso
     from imu_square.units import URAD
 
     lines = [
@@ -75,7 +75,7 @@ def _describe(row, design):
 
 
 def _json(row, design, anchors=()):
-    from imu_square.monitor.evaluate import iso
+    from imu_square.monitor.verdict import iso
     from imu_square.units import URAD
 
     return {
@@ -111,8 +111,8 @@ def _json(row, design, anchors=()):
 
 def run_set(args):
     """Set a baseline from the runs given, design its alarms, print it."""
+    from imu_square.monitor.baseline_setup import runs_for_baseline, set_baseline
     from imu_square.monitor.night import stored_design
-    from imu_square.monitor.setup import runs_for_baseline, set_baseline
 
     if bool(args.runs) == (args.last is not None):
         raise ImuSquareError("give the baseline's runs (RUN...) or --last N, one of the two")
@@ -161,7 +161,7 @@ def run_show(args):
 
 def run_anchor(args):
     """Anchor the current baseline by a ballbar value or laser diagonals."""
-    from imu_square.monitor.setup import anchor_by_ballbar, anchor_by_diagonals
+    from imu_square.monitor.baseline_setup import anchor_by_ballbar, anchor_by_diagonals
     from imu_square.units import URAD
 
     with monitor_session(args.config) as (config, history):

@@ -100,7 +100,7 @@ def run(args):
             ) from None
         print(f"wrote {', '.join(str(p) for p in paths.values())}", file=sys.stderr)
     if args.plot:
-        from imu_square.discrepancy.plot import plot_gaps
+        from imu_square.discrepancy.gap_figure import plot_gaps
 
         plot_gaps(result, args.plot, title=str(args.recording))
         print(f"wrote {args.plot}", file=sys.stderr)

@@ -52,9 +52,9 @@ def run(args):
         return _compare(args)
     import math
 
-    from imu_square.monitor.encoding import ns_from_datetime
-    from imu_square.monitor.evaluate import iso, verdict
+    from imu_square.monitor.history.encoding import ns_from_datetime
     from imu_square.monitor.night import assess_history, night_record
+    from imu_square.monitor.verdict import iso, verdict
     from imu_square.units import URAD
 
     since = _since(args.since)
@@ -94,7 +94,7 @@ def run(args):
             if args.json:
                 print(json.dumps(night_record(assessment, n, verdict(assessment, n))))
         if args.plot:
-            from imu_square.monitor.plots import plot_trend
+            from imu_square.monitor.report.figures import plot_trend
 
             shown = assessment if start is None else replace(assessment, nights=tuple(nights))
             plot_trend(shown, args.plot)
@@ -109,8 +109,8 @@ def _compare(args):
     import numpy as np
 
     from imu_square.monitor.config import read_monitor
-    from imu_square.monitor.evaluate import iso
-    from imu_square.monitor.store import open_history
+    from imu_square.monitor.history.store import open_history
+    from imu_square.monitor.verdict import iso
     from imu_square.units import URAD
 
     machine = read_monitor(args.config).machine_id

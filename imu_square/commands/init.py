@@ -45,7 +45,7 @@ def run(args):
     if out.exists() and not args.force:
         raise ImuSquareError(f"{out}: exists already; give --force to overwrite it")
     if args.systemd:  # checked first: a failure must not leave a monitor file behind
-        from imu_square.monitor.outputs import ensure_folder
+        from imu_square.monitor.publish import ensure_folder
 
         ensure_folder(Path(args.systemd).expanduser(), "systemd units")
     text = monitor_file_text(args.machine_id, port=args.port, history=args.history)

@@ -96,7 +96,7 @@ def register(sub):
 
 def _sensor(args):
     from imu_square.errors import ConfigError
-    from imu_square.planner import SensorSpec
+    from imu_square.program.planner import SensorSpec
     from imu_square.simulate import read_sensor
     from imu_square.units import UG, G
 
@@ -131,7 +131,7 @@ def _sensor(args):
 def run(args):
     """Plan, print the plan, write the program file and the JSON."""
     from imu_square.errors import ProgramError
-    from imu_square.planner import Goal, Limits, PlanInputError, plan_test
+    from imu_square.program.planner import Goal, Limits, PlanInputError, plan_test
     from imu_square.units import MM, MM_PER_MIN, MS, URAD
 
     if args.output:  # refuse a bad path before planning, not after printing the plan
@@ -177,7 +177,7 @@ def run(args):
 def _in_flag_units(exc, args):
     """The planner's refusal of a value, restated with the option and the unit it came in,
     or as the --sensor file's value when it came from there."""
-    from imu_square.planner import PlanError, interval
+    from imu_square.program.planner import PlanError, interval
     from imu_square.units import MM, MM_PER_MIN, MS, UG, URAD, G
 
     flag, unit, scale = {

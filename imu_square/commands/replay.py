@@ -110,6 +110,7 @@ def run(args):
 
     from imu_square.allocator import tune_allocator
     from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.history.store import open_history
     from imu_square.monitor.replay import (
         ReplayJob,
         ReplaySummary,
@@ -118,7 +119,6 @@ def run(args):
         run_local,
         store_outcome,
     )
-    from imu_square.monitor.store import open_history
 
     tune_allocator()  # --jobs 1 analyses in this process (imu_square.allocator)
     config = read_monitor(args.config)
@@ -140,7 +140,7 @@ def run(args):
         for p in paths:
             print(p)
         return 0
-    from imu_square.monitor.encoding import settings_hash
+    from imu_square.monitor.history.encoding import settings_hash
     from imu_square.monitor.night import analysis_settings
 
     summary = ReplaySummary(files=len(paths))
@@ -182,10 +182,10 @@ def _rebaseline(original, config, history):
     baseline names runs analysed otherwise: the replayed runs get a baseline
     of their own, from the same recordings analysed the new way.
     """
-    from imu_square.monitor.encoding import settings_hash
+    from imu_square.monitor.baseline_setup import set_baseline
+    from imu_square.monitor.history.encoding import settings_hash
+    from imu_square.monitor.history.store import open_history
     from imu_square.monitor.night import analysis_settings
-    from imu_square.monitor.setup import set_baseline
-    from imu_square.monitor.store import open_history
 
     machine = config.machine_id
     settings = settings_hash(analysis_settings(config))
@@ -220,9 +220,9 @@ def _finite(x):
 
 def _judge_all(config, history, summary):
     """Judge every run in recording-time order and store the verdicts."""
-    from imu_square.monitor.evaluate import iso
+    from imu_square.monitor.history.rows import EvaluationRow
     from imu_square.monitor.night import assess_history
-    from imu_square.monitor.rows import EvaluationRow
+    from imu_square.monitor.verdict import iso
 
     assessment = assess_history(config, history)
     base = assessment.baseline_row

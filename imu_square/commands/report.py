@@ -25,8 +25,8 @@ def run(args):
     """Judge the history and write the page."""
     from imu_square.io.output import check_output_path
     from imu_square.monitor.night import assess_history
-    from imu_square.monitor.outputs import last_valid_result
-    from imu_square.monitor.report import render_report, write_report
+    from imu_square.monitor.publish import last_valid_result
+    from imu_square.monitor.report.html import render_report, write_report
 
     check_output_path(args.output, overwrite=True)
     with monitor_session(args.config) as (config, history):

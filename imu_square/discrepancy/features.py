@@ -21,7 +21,7 @@ All of it is linear in the samples, so the features of ``data - model`` are
 those of the data minus those of the model: both go through the same
 operator, and what it does to the circle (leakage at a cycle's ends) cancels.
 
-The noise of the features is modelled in :mod:`imu_square.discrepancy.noise`.
+The noise of the features is modelled in :mod:`imu_square.discrepancy.window_noise`.
 """
 
 from dataclasses import dataclass

@@ -2,7 +2,7 @@
 
 Everything here is read from the Fisher information at the fitted model: the
 fit vector is whitened, so the information of a set of parameters is
-``J'J`` with ``J`` their derivatives (:class:`~imu_square.discrepancy.fitting.Problem`).
+``J'J`` with ``J`` their derivatives (:class:`~imu_square.discrepancy.model_fit.Problem`).
 
 Signature correlation
     For two candidates with derivative spaces ``A`` and ``B`` (identifiable
@@ -38,9 +38,9 @@ from scipy import stats
 from imu_square.discrepancy.features import FeatureOperator
 from imu_square.discrepancy.forward import LEAD_IN_S, ForwardModel
 from imu_square.discrepancy.layout import layout_from_timeline
-from imu_square.discrepancy.noise import NoiseModel
 from imu_square.discrepancy.parameters import base_parameters, effect_model_parameters
 from imu_square.discrepancy.views import FeatureSpace
+from imu_square.discrepancy.window_noise import NoiseModel
 from imu_square.errors import ImuSquareError
 from imu_square.program.spec import program_from_mapping
 from imu_square.simulate.effects import SHAPE
@@ -217,7 +217,7 @@ class _Experiment:
 
 def _simulated_problem(problem, state, test):
     """The Problem of an extra test, simulated noise-free from the fitted model."""
-    from imu_square.discrepancy.fitting import Problem
+    from imu_square.discrepancy.model_fit import Problem
 
     layout = problem.model.layout
     program = layout.program

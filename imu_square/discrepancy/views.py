@@ -33,7 +33,7 @@ harmonic of the pipeline's 4 Hz low-pass, at least 10):
 ``trend``
     Each cycle's offset and circle harmonic (three numbers per axis) of the
     cycles of one direction over every run, whitened with their covariance
-    across cycles (:mod:`imu_square.discrepancy.noise`: a 1/f part
+    across cycles (:mod:`imu_square.discrepancy.window_noise`: a 1/f part
     correlates neighbouring cycles), and projected orthogonally to a
     constant: ``n - 1`` components per direction and number, so a drift
     across cycles or runs shows, a constant misfit does not.

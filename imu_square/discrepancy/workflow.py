@@ -22,11 +22,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from imu_square.discrepancy.features import FeatureOperator
-from imu_square.discrepancy.fitting import Problem
 from imu_square.discrepancy.forward import ForwardModel
 from imu_square.discrepancy.identify import Member, signature_correlations, suggest_tests
 from imu_square.discrepancy.layout import layout_from_recording
-from imu_square.discrepancy.noise import estimate_noise
+from imu_square.discrepancy.model_fit import Problem
 from imu_square.discrepancy.parameters import (
     BASE,
     ModelState,
@@ -36,6 +35,7 @@ from imu_square.discrepancy.parameters import (
 from imu_square.discrepancy.result import DiscrepancyResult, FittedValue, StepReport
 from imu_square.discrepancy.selection import grow
 from imu_square.discrepancy.views import FeatureSpace
+from imu_square.discrepancy.window_noise import estimate_noise
 from imu_square.errors import AnalysisError, ConfigError
 from imu_square.log import logger
 from imu_square.pipeline.squareness import AnalysisOptions, analyze

@@ -35,10 +35,10 @@ file, as ``imu-square init`` writes it::
     step_um_per_m = 10.0         # the change to detect, for the out-of-control run length
     monte_carlo_nights = 4000000 # nights simulated to check the design
 
-    [alerts] ...                 # imu_square.monitor.alert_config
-    [metrics] ...                # imu_square.monitor.metrics
+    [alerts] ...                 # imu_square.monitor.alerts.config
+    [metrics] ...                # imu_square.monitor.report.metrics
 
-The history's per-user default is :func:`imu_square.monitor.store.default_history_path`.
+The history's per-user default is :func:`imu_square.monitor.history.store.default_history_path`.
 """
 
 import tomllib
@@ -46,9 +46,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from imu_square.errors import MonitorConfigError
-from imu_square.monitor.alert_config import AlertsConfig, alerts_from_mapping
+from imu_square.monitor.alerts.config import AlertsConfig, alerts_from_mapping
 from imu_square.monitor.fields import Table
-from imu_square.monitor.metrics import MetricsConfig, metrics_from_mapping
+from imu_square.monitor.report.metrics import MetricsConfig, metrics_from_mapping
 from imu_square.textfile import read_text
 from imu_square.units import URAD
 
@@ -251,8 +251,8 @@ class MonitorConfig:
         return program
 
     def history_location(self):
-        """The history as :func:`~imu_square.monitor.store.open_history` takes it."""
-        from imu_square.monitor.store import default_history_path
+        """The history as :func:`~imu_square.monitor.history.store.open_history` takes it."""
+        from imu_square.monitor.history.store import default_history_path
 
         return self.history or str(default_history_path())
 
@@ -260,7 +260,7 @@ class MonitorConfig:
         """Folder of the nightly recordings, plots and report (created when written)."""
         if self.data_dir is not None:
             return self.data_dir
-        from imu_square.monitor.store import default_history_path, is_postgres_url
+        from imu_square.monitor.history.store import default_history_path, is_postgres_url
 
         location = self.history_location()
         base = default_history_path().parent if is_postgres_url(location) else Path(location).parent

@@ -169,8 +169,8 @@ def seed_history(config, history, now=None, progress=None):
         Called with a line of text now and then.
     """
     from imu_square.io.mcap import write_mcap
+    from imu_square.monitor.baseline_setup import set_baseline
     from imu_square.monitor.night import analyse_recording, judge_recording, run_row
-    from imu_square.monitor.setup import set_baseline
     from imu_square.simulate import read_sensor, simulate_run
     from imu_square.simulate.machine import machine_from_mapping
 
@@ -239,7 +239,7 @@ def prepare_demo(folder, progress=None, now=None):
     -------
     MonitorConfig
     """
-    from imu_square.monitor.store import open_history
+    from imu_square.monitor.history.store import open_history
 
     folder = Path(folder)
     config = read_monitor(write_demo_files(folder))

@@ -15,10 +15,10 @@ import numpy as np
 
 from imu_square import __version__
 from imu_square.errors import AnalysisError, ImuSquareError
-from imu_square.monitor.drift import fit_night_drift, power_on_offset_s
-from imu_square.monitor.encoding import file_sha256, first_line, settings_hash
-from imu_square.monitor.evaluate import assess, design_for, iso, verdict
-from imu_square.monitor.rows import EvaluationRow, RunRow
+from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
+from imu_square.monitor.history.rows import EvaluationRow, RunRow
+from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
+from imu_square.monitor.verdict import assess, design_for, iso, verdict
 from imu_square.units import MM_PER_MIN, URAD
 
 
@@ -33,7 +33,7 @@ class NightOutcome:
     inserted : bool
         False when the same recording under the same settings was there already.
     state : str
-        The verdict's state (:data:`~imu_square.monitor.evaluate.STATES`).
+        The verdict's state (:data:`~imu_square.monitor.verdict.STATES`).
     verdict : str
         The one line a user reads in the morning.
     record : dict
@@ -213,7 +213,7 @@ def analyse_recording(config, path, program=None, complete=True):
 
 def stored_design(history, baseline_row, settings):
     """The alarm design of a baseline, computed once and kept in the history."""
-    from imu_square.monitor.alarms import AlarmDesign
+    from imu_square.monitor.stats.alarms import AlarmDesign
 
     if baseline_row is None:
         return None

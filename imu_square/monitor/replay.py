@@ -24,8 +24,8 @@ from pathlib import Path
 from imu_square.allocator import tune_allocator
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import AnalysisSettings
-from imu_square.monitor.encoding import first_line
-from imu_square.monitor.rows import RunRow
+from imu_square.monitor.history.encoding import first_line
+from imu_square.monitor.history.rows import RunRow
 
 STATUSES = ("analysed", "invalid", "skipped", "failed")
 

@@ -1,6 +1,6 @@
 """Robust fits near a known solution by Newton's method: single cycles, resamples, stage 2.
 
-:func:`imu_square.pipeline.fit.fit_irls` solves the M-estimate's equations
+:func:`imu_square.pipeline.sine_fit.fit_irls` solves the M-estimate's equations
 ``sum_i sqrt(p_i) psi(z_i) x_i = 0``, ``z_i = sqrt(p_i) r_i / s``, ``s`` the
 MAD scale of the ``z``, by reweighted least squares, which converges
 linearly: on a typical machine's spiky traces the error shrinks about four
@@ -25,7 +25,7 @@ their own data's average) are far from that.
 
 import numpy as np
 
-from imu_square.pipeline.fit import _mad0, _psi_and_deriv, fit_irls
+from imu_square.pipeline.sine_fit import _mad0, _psi_and_deriv, fit_irls
 
 
 def fit_newton(
@@ -33,7 +33,7 @@ def fit_newton(
 ):
     """Robust linear fits of the rows of ``endog``, started near their solution.
 
-    Same estimate as :func:`imu_square.pipeline.fit.fit_irls` with
+    Same estimate as :func:`imu_square.pipeline.sine_fit.fit_irls` with
     ``conv="coefs"`` (every coefficient moves less than ``tol`` in the last
     step), the scale re-estimated at every step; only the coefficients are
     returned.
@@ -140,7 +140,7 @@ def first_order_params(exog, fit, row, norm, change):
     exog : ndarray, shape (n_obs, n_params)
         Design matrix of the fit.
     fit : FitResult
-        The converged fits (:func:`imu_square.pipeline.fit.fit_irls`).
+        The converged fits (:func:`imu_square.pipeline.sine_fit.fit_irls`).
     row : int
         Which of its fits.
     norm : statsmodels.robust.norms.RobustNorm

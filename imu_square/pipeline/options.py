@@ -3,7 +3,7 @@
 from dataclasses import dataclass
 
 from imu_square.errors import AnalysisError
-from imu_square.pipeline.fit import robust_norm
+from imu_square.pipeline.sine_fit import robust_norm
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ class AnalysisOptions:
         return robust_norm(self.norm, self.tuning)
 
     def irls(self):
-        """Keyword options of :func:`imu_square.pipeline.fit.fit_irls`."""
+        """Keyword options of :func:`imu_square.pipeline.sine_fit.fit_irls`."""
         return {
             "maxiter": self.maxiter,
             "tol": self.tol,

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.pipeline.fit import circle_phases, mean_phase, sine_design, wrap_angle
 from imu_square.pipeline.newton import first_order_params, fit_newton
+from imu_square.pipeline.sine_fit import circle_phases, mean_phase, sine_design, wrap_angle
 from imu_square.pipeline.uncertainty import bootstrap_counts, type_a
 
 _BOOTSTRAP_TOLERANCE = 1e-2  # of the per-pair uncertainty, in phase
@@ -79,7 +79,7 @@ def fit_cycles(cycles, mean_fit, cos_2eps_c, period_s, norm, irls, bootstrap_n=0
     norm : statsmodels.robust.norms.RobustNorm
         The robust norm.
     irls : dict
-        IRLS options for :func:`imu_square.pipeline.fit.fit_irls`.
+        IRLS options for :func:`imu_square.pipeline.sine_fit.fit_irls`.
     bootstrap_n : int
         Resamples per direction; 0 skips the bootstrap.
     seed : int

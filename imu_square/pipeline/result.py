@@ -60,7 +60,7 @@ class RunResult:
         Standard deviation of the bootstrap over cycles (NaN if skipped). [rad]
     crb_rad : float
         Cramér-Rao bound for the noise at the circle frequency,
-        :attr:`noise_density_circle_m_s2_rthz` (:mod:`imu_square.pipeline.noise`). [rad]
+        :attr:`noise_density_circle_m_s2_rthz` (:mod:`imu_square.pipeline.noise_floor`). [rad]
     noise_density_m_s2_rthz : float
         White-noise density used for the bound: the sensor's stated one if
         known, else estimated from what the fitted model leaves. [m/s^2/sqrt(Hz)]

@@ -6,7 +6,7 @@ flipped CW fits, with each block's ``phi(t)`` anchored at the middle of its
 motion (:mod:`imu_square.pipeline.segment`). A timing error of the anchor
 shifts the two directions the opposite way and cancels in their mean
 (``docs/model.md``). The paper's stage 2 cannot give it: it is degenerate for
-a circle (:mod:`imu_square.pipeline.fit`).
+a circle (:mod:`imu_square.pipeline.sine_fit`).
 
 Seen through sensor axes turned by ``eps_c`` the machine's terms shrink by
 ``cos(2 eps_c)`` (``docs/model.md``, measurand); near 45 degrees they vanish,

@@ -12,12 +12,12 @@ frozen :class:`RunResult`:
   monitor divides the *change* of ``theta_y - theta_x`` by it, in which the
   sensor's ``beta`` cancels;
 - ``eps_c``, the sensor's rotation about Z (:mod:`imu_square.pipeline.rotation`;
-  the paper's stage 2 is degenerate, see :mod:`imu_square.pipeline.fit`; its
+  the paper's stage 2 is degenerate, see :mod:`imu_square.pipeline.sine_fit`; its
   value is kept as ``eps_c_stage2_rad``);
 - uncertainties: type A from the per-cycle scatter (CCW cycle k paired with
   CW cycle k) with its Student's t coverage factor, a bootstrap over cycles,
   and the Cramér-Rao bound for the noise at the circle frequency
-  (:mod:`imu_square.pipeline.noise`);
+  (:mod:`imu_square.pipeline.noise_floor`);
 - a bound on what the servos' amplitude mismatch adds through ``eps_c``
   (:mod:`imu_square.pipeline.servo`);
 - quality flags, and refusal (:class:`AnalysisError`) when the data cannot give
@@ -39,14 +39,14 @@ from imu_square.log import logger
 from imu_square.pipeline import quality as q
 from imu_square.pipeline.align import bad_intervals, cycle_traces, interpolation_gain
 from imu_square.pipeline.filter import filter_recording, passband_gain
-from imu_square.pipeline.fit import fit_mean_traces
-from imu_square.pipeline.noise import noise_floor
+from imu_square.pipeline.noise_floor import noise_floor
 from imu_square.pipeline.options import AnalysisOptions
 from imu_square.pipeline.per_cycle import fit_cycles
 from imu_square.pipeline.result import DirectionResult, RunResult
 from imu_square.pipeline.rotation import circular_mean, eps_c_uncertainty, estimate_eps_c
 from imu_square.pipeline.segment import block_events, segment
 from imu_square.pipeline.servo import servo_amplitude_bound
+from imu_square.pipeline.sine_fit import fit_mean_traces
 from imu_square.pipeline.stage2 import fit_cross_terms
 from imu_square.pipeline.uncertainty import coverage_factor, type_a
 

@@ -1,6 +1,6 @@
 """Stage 2 of the paper: cross terms fitted to the stage-1 residuals.
 
-Degenerate for a circle (:mod:`imu_square.pipeline.fit`): stage 1 has already
+Degenerate for a circle (:mod:`imu_square.pipeline.sine_fit`): stage 1 has already
 absorbed every component at ``omega``, so the cross terms come out zero up to
 noise whatever the sensor's rotation; the pipeline keeps the value as
 ``eps_c_stage2_rad`` only to show it.
@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.pipeline.fit import robust_norm
 from imu_square.pipeline.newton import fit_newton
+from imu_square.pipeline.sine_fit import robust_norm
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ def fit_cross_terms(phi, stage1, norm=None, **irls_options):
     norm : statsmodels.robust.norms.RobustNorm, optional
         Tukey biweight if None.
     **irls_options
-        Options of :func:`imu_square.pipeline.fit.fit_irls`; the fits are solved by
+        Options of :func:`imu_square.pipeline.sine_fit.fit_irls`; the fits are solved by
         :func:`imu_square.pipeline.newton.fit_newton`, started at zero.
 
     Returns

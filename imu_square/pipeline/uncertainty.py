@@ -10,7 +10,7 @@ Three figures, each answering a different question:
 - the Cramér-Rao bound ``sqrt(2) d / (A sqrt(T))`` (``docs/model.md``), the
   least standard deviation any unbiased estimator can reach with white noise
   of density ``d`` on each axis, amplitude ``A`` and analysed time ``T``
-  (:mod:`imu_square.pipeline.noise` estimates ``d`` and the 1/f part).
+  (:mod:`imu_square.pipeline.noise_floor` estimates ``d`` and the 1/f part).
 """
 
 import numpy as np

@@ -43,7 +43,7 @@ from imu_square.reference.diagonal import (
     face_diagonals,
     squareness_from_diagonals,
 )
-from imu_square.reference.lines import REFERENCE_LINES, ReferenceLine, reference_line
+from imu_square.reference.reference_line import REFERENCE_LINES, ReferenceLine, reference_line
 from imu_square.reference.step_diagonal import StepDiagonalResult, step_diagonal_test
 
 __all__ = [

@@ -10,7 +10,7 @@ R(+90 deg) a_k``; at commanded point ``p`` the reading is ``n_k . (p + d(p) -
 o_k)`` against the arm position ``s = a_k . (p - o_k)``, with ``o_k`` the arm's
 origin. The slope ``m_k`` of the reading's reference line (least squares by
 default, as in Chapman's paper; end-point or minimum-zone on request, see
-:mod:`imu_square.reference.lines`) is the angle by which the machine's motion
+:mod:`imu_square.reference.reference_line`) is the angle by which the machine's motion
 along that arm is turned counter-clockwise from the arm; a line's turn does
 not depend on which way along it ``a_k`` points. Hence, with ``m_X`` and
 ``m_Y`` the slopes of the arms along X and Y,
@@ -63,8 +63,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from imu_square.errors import ImuSquareError, check_option
-from imu_square.reference.lines import REFERENCE_LINES
-from imu_square.reference.lines import reference_line as reference_line_fit
+from imu_square.reference.reference_line import REFERENCE_LINES
+from imu_square.reference.reference_line import reference_line as reference_line_fit
 
 SHAPES = ("L", "T", "+")
 ORIENTATIONS_DEG = (0, 90, 180, 270)

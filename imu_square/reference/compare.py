@@ -49,7 +49,7 @@ from imu_square.program.spec import program_from_mapping
 from imu_square.reference.ballbar import ballbar_squareness
 from imu_square.reference.biaxial import ORIENTATIONS_DEG, biaxial_squareness
 from imu_square.reference.diagonal import diagonal_squareness
-from imu_square.reference.lines import REFERENCE_LINES
+from imu_square.reference.reference_line import REFERENCE_LINES
 from imu_square.simulate import data_path, read_sensor, simulate_run
 from imu_square.units import MM, URAD
 

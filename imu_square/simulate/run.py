@@ -15,8 +15,8 @@ from imu_square.errors import ConfigError
 from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.simulate.kinematics import carriage_motion, carriage_tilt
 from imu_square.simulate.machine import MachineModel
-from imu_square.simulate.noise import digitise, sensor_noise
 from imu_square.simulate.sensor import SensorModel
+from imu_square.simulate.sensor_noise import digitise, sensor_noise
 from imu_square.simulate.trajectory import build_timeline
 from imu_square.simulate.truth import build_truth
 

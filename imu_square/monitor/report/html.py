@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from imu_square import __version__
-from imu_square.monitor.evaluate import iso, verdict
+from imu_square.monitor.verdict import iso, verdict
 from imu_square.units import URAD
 
 SECTIONS = ("verdict", "trend", "last-run", "sensor", "baseline", "alarm-design", "nights")
@@ -66,7 +66,7 @@ def render_report(assessment, last_result=None, last_title="", now=None):
     str
         One self-contained HTML page.
     """
-    from imu_square.monitor.plots import plot_sensor, plot_trend
+    from imu_square.monitor.report.figures import plot_sensor, plot_trend
 
     now = now or datetime.now(UTC)
     machine = assessment.machine_id
@@ -94,7 +94,7 @@ def render_report(assessment, last_result=None, last_title="", now=None):
         '<section id="last-run"><h2>Last valid run</h2>',
     ]
     if last_result is not None:
-        from imu_square.pipeline.plot import plot_results
+        from imu_square.pipeline.run_figure import plot_results
 
         fig = _png(lambda p: plot_results([last_result], p, title=last_title))
         parts += [
@@ -187,6 +187,6 @@ def write_report(path, text):
     text : str
         The page.
     """
-    from imu_square.monitor.atomic import write_atomic
+    from imu_square.io.atomic import write_atomic
 
     write_atomic(Path(path), text.encode("utf-8"))

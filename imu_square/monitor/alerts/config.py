@@ -42,12 +42,12 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from imu_square.monitor.alert_types import DEFAULT_ALERT_STATES, STATES
+from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES
+from imu_square.monitor.alerts.json_file import JSON_FILE_FIELDS, json_file_from_table
+from imu_square.monitor.alerts.log_line import LOG_FIELDS, LogSink, log_from_table
+from imu_square.monitor.alerts.mail import EMAIL_FIELDS, email_from_table
+from imu_square.monitor.alerts.webhook import WEBHOOK_FIELDS, webhook_from_table
 from imu_square.monitor.fields import Table, tables
-from imu_square.monitor.sink_email import EMAIL_FIELDS, email_from_table
-from imu_square.monitor.sink_json import JSON_FILE_FIELDS, json_file_from_table
-from imu_square.monitor.sink_log import LOG_FIELDS, LogSink, log_from_table
-from imu_square.monitor.sink_webhook import WEBHOOK_FIELDS, webhook_from_table
 
 ALERTS_FIELDS = ("states", "attempts", "backoff_s", "max_total_s", "outbox")
 SINK_KINDS = {

@@ -44,9 +44,9 @@ from email.utils import format_datetime
 from pathlib import Path
 
 from imu_square.log import logger
-from imu_square.monitor.alert_types import DEFAULT_ALERT_STATES, STATES, DeliveryError, one_line
+from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError, one_line
+from imu_square.monitor.alerts.webhook import is_loopback
 from imu_square.monitor.fields import REQUIRED
-from imu_square.monitor.sink_webhook import is_loopback
 
 SECURITY = ("starttls", "ssl", "none")
 DEFAULT_PORTS = {"starttls": 587, "ssl": 465, "none": 25}

@@ -45,8 +45,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from imu_square.errors import MonitorError
-from imu_square.monitor.alert_types import STATES
-from imu_square.monitor.atomic import write_atomic
+from imu_square.io.atomic import write_atomic
+from imu_square.monitor.alerts.alert import STATES
 from imu_square.monitor.fields import Table
 
 METRICS_FIELDS = ("textfile",)
@@ -107,7 +107,7 @@ class MetricsSnapshot:
     machine_id : str
         The machine.
     state : str
-        One of :data:`~imu_square.monitor.alert_types.STATES`.
+        One of :data:`~imu_square.monitor.alerts.alert.STATES`.
     runs : int
         Runs in the history.
     invalid_runs : int

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from imu_square.errors import HistoryError
-from imu_square.monitor.encoding import first_line
+from imu_square.monitor.history.encoding import first_line
 
 #: RETURNING needs SQLite 3.35.
 MIN_SQLITE = (3, 35, 0)

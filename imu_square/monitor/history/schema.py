@@ -12,7 +12,7 @@ elsewhere): a later change is a new migration. The DDL is shared; only the id
 column differs (``{id}``). Types: text as TEXT; floats as DOUBLE PRECISION
 (REAL affinity in SQLite); booleans as BOOLEAN; times as BIGINT nanoseconds
 since the Unix epoch, UTC; JSON as canonical TEXT
-(:func:`imu_square.monitor.encoding.canonical_json`), which reads back
+(:func:`imu_square.monitor.history.encoding.canonical_json`), which reads back
 byte-identical on both backends, where PostgreSQL's ``jsonb`` would reorder it.
 
 Versions:
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from imu_square import __version__
 from imu_square.errors import HistoryError
-from imu_square.monitor.encoding import first_line, now_ns
+from imu_square.monitor.history.encoding import first_line, now_ns
 
 _ID = {
     "sqlite": "INTEGER PRIMARY KEY",

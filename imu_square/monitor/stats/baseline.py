@@ -2,7 +2,8 @@
 
 The **baseline** is the machine's own ``theta_y - theta_x`` when the monitor
 was set up: the mean of at least :data:`MIN_RUNS` valid runs. It is not a
-reference method (ballbar, laser): those can *anchor* it (:mod:`.anchor`).
+reference method (ballbar, laser): those can *anchor* it
+(:mod:`imu_square.monitor.baseline_setup`).
 
 The change of a night against it (``docs/model.md``, "The measurand")::
 

@@ -41,8 +41,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from imu_square.monitor.baseline import Baseline, RunValue, change_since
-from imu_square.monitor.encoding import datetime_from_ns
+from imu_square.monitor.history.encoding import datetime_from_ns
+from imu_square.monitor.stats.baseline import Baseline, RunValue, change_since
 from imu_square.units import URAD
 
 STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
@@ -197,7 +197,7 @@ def design_for(baseline_row, runs, settings):
     -------
     AlarmDesign
     """
-    from imu_square.monitor.alarms import design_alarms
+    from imu_square.monitor.stats.alarms import design_alarms
 
     c = abs(math.cos(2 * baseline_row.eps_c_rad))
     u = np.array([r.u_squareness_rad for r in runs]) / c
@@ -243,8 +243,8 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
     -------
     Assessment
     """
-    from imu_square.monitor.alarms import evaluate
-    from imu_square.monitor.baseline import remount_tolerance
+    from imu_square.monitor.stats.alarms import evaluate
+    from imu_square.monitor.stats.baseline import remount_tolerance
 
     machine_id = runs[0].machine_id if runs else ""
     earlier = earlier or {}
@@ -437,7 +437,7 @@ def _drift_corrections(runs, base_runs):
 def _run_drift(runs, in_baseline, before_ns):
     """The across-night regression (reported only), or None when it cannot be fitted."""
     from imu_square.errors import AnalysisError
-    from imu_square.monitor.drift import fit_run_drift
+    from imu_square.monitor.stats.drift import fit_run_drift
 
     used = [
         r for r in runs if r.valid and (r.id in in_baseline or (r.recorded_at_ns or 0) >= before_ns)

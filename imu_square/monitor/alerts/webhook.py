@@ -2,7 +2,7 @@
 
 Built on the standard library's :mod:`urllib.request`: one POST with a
 timeout, custom headers and a TLS context is all it needs, and retries are the
-monitor's own (:mod:`imu_square.monitor.alerts`), so a client library would add
+monitor's own (:mod:`imu_square.monitor.alerts.send`), so a client library would add
 a dependency and nothing else.
 
 The request carries ``Content-Type: application/json; charset=utf-8``,
@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from imu_square import __version__
-from imu_square.monitor.alert_types import DEFAULT_ALERT_STATES, STATES, DeliveryError
+from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError
 from imu_square.monitor.fields import has_control_chars
 
 WEBHOOK_FIELDS = (

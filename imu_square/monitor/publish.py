@@ -12,7 +12,7 @@ from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 from imu_square.log import logger
-from imu_square.monitor.encoding import datetime_from_ns
+from imu_square.monitor.history.encoding import datetime_from_ns
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,7 @@ def last_valid_result(assessment, options):
 
 def metrics_snapshot(assessment):
     """The metrics of a machine's assessment (:class:`~.metrics.MetricsSnapshot`)."""
-    from imu_square.monitor.metrics import MetricsSnapshot
+    from imu_square.monitor.report.metrics import MetricsSnapshot
 
     nights = assessment.nights
     latest = nights[-1] if nights else None
@@ -143,8 +143,8 @@ def write_night_outputs(config, outcome, out_dir, alert=True):
     -------
     NightFiles
     """
-    from imu_square.monitor.plots import plot_trend
-    from imu_square.monitor.report import render_report, write_report
+    from imu_square.monitor.report.figures import plot_trend
+    from imu_square.monitor.report.html import render_report, write_report
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -164,7 +164,7 @@ def write_night_outputs(config, outcome, out_dir, alert=True):
         report = None
     metrics = None
     if config.metrics is not None and config.metrics.textfile is not None:
-        from imu_square.monitor.metrics import write_metrics
+        from imu_square.monitor.report.metrics import write_metrics
 
         try:
             metrics = write_metrics(config.metrics.textfile, metrics_snapshot(assessment))
@@ -172,7 +172,7 @@ def write_night_outputs(config, outcome, out_dir, alert=True):
             logger.warning("%s", exc)
     alerts = None
     if alert:
-        from imu_square.monitor.alerts import send_alerts
+        from imu_square.monitor.alerts.send import send_alerts
 
         alerts = send_alerts(
             config.alerts,

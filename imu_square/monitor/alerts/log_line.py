@@ -11,7 +11,7 @@ import logging
 from dataclasses import dataclass
 
 from imu_square.log import logger
-from imu_square.monitor.alert_types import STATES, one_line
+from imu_square.monitor.alerts.alert import STATES, one_line
 
 _LEVELS = {
     "ok": logging.INFO,

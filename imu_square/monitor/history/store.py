@@ -6,9 +6,9 @@
 
 :func:`open_history` takes a file path (SQLite) or a ``postgresql://`` URL
 (psycopg 3, extra ``imu-square[postgres]``), checks the history, creates or
-migrates its schema (:mod:`imu_square.monitor.schema`) and returns a
+migrates its schema (:mod:`imu_square.monitor.history.schema`) and returns a
 :class:`History`. Its methods take and return the frozen rows of
-:mod:`imu_square.monitor.rows` (imported here too, with the keys of a run:
+:mod:`imu_square.monitor.history.rows` (imported here too, with the keys of a run:
 :func:`file_sha256` of the recording and :func:`settings_hash` of the
 analysis settings).
 
@@ -37,8 +37,8 @@ from pathlib import Path
 
 from imu_square.errors import HistoryError
 from imu_square.log import logger
-from imu_square.monitor import schema
-from imu_square.monitor.encoding import (
+from imu_square.monitor.history import schema
+from imu_square.monitor.history.encoding import (
     canonical_json,
     datetime_from_ns,
     file_sha256,
@@ -46,7 +46,7 @@ from imu_square.monitor.encoding import (
     ns_from_datetime,
     settings_hash,
 )
-from imu_square.monitor.rows import (
+from imu_square.monitor.history.rows import (
     EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
@@ -151,7 +151,7 @@ def open_history(location=None, *, busy_timeout_s=BUSY_TIMEOUT_S):
             f"history location must be a file path or a postgresql:// URL, got {location!r}"
         )
     if is_postgres_url(location):
-        from imu_square.monitor.postgres_backend import PostgresBackend
+        from imu_square.monitor.history.postgres import PostgresBackend
 
         backend = PostgresBackend(str(location), busy_timeout_s)
     elif _URL.match(str(location)):
@@ -159,7 +159,7 @@ def open_history(location=None, *, busy_timeout_s=BUSY_TIMEOUT_S):
             f"history location must be a file path or a postgresql:// URL, got {location!r}"
         )
     else:
-        from imu_square.monitor.sqlite_backend import SqliteBackend
+        from imu_square.monitor.history.sqlite import SqliteBackend
 
         backend = SqliteBackend(location, busy_timeout_s)
     try:
@@ -581,7 +581,7 @@ class History:
         baseline_id : int
             The baseline.
         design : dict
-            :meth:`~imu_square.monitor.alarms.AlarmDesign.to_json_dict`.
+            :meth:`~imu_square.monitor.stats.alarms.AlarmDesign.to_json_dict`.
         """
         text = canonical_json(design, "alarm design")
         with self._write():

@@ -4,7 +4,7 @@ The rows are frozen dataclasses, checked and normalised when they are built,
 so that a row reads back from either backend exactly as it was stored:
 
 - times are integer nanoseconds since the Unix epoch, UTC (fields ``*_ns``),
-  like the times in MCAP (:mod:`imu_square.monitor.encoding` converts);
+  like the times in MCAP (:mod:`imu_square.monitor.history.encoding` converts);
 - a float field holds a Python float or None (NULL); NaN becomes None, since
   SQLite stores NaN as NULL anyway, and -0.0 becomes 0.0;
 - text fields are UTF-8 without NUL (PostgreSQL's text refuses NUL);
@@ -12,7 +12,7 @@ so that a row reads back from either backend exactly as it was stored:
   ``result``, ``input``, ``statistics``) hold JSON values only: numpy arrays
   become lists, numpy scalars Python numbers, non-finite floats None, tuples
   lists and keys text. They are stored as canonical JSON text
-  (:func:`~imu_square.monitor.encoding.canonical_json`), byte-identical
+  (:func:`~imu_square.monitor.history.encoding.canonical_json`), byte-identical
   whichever backend or process wrote them. Treat them as read-only.
 
 A field ``id`` or ``created_at_ns`` left None is filled in by the store.
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 from imu_square import __version__
 from imu_square.errors import HistoryError, check_option
-from imu_square.monitor.encoding import datetime_from_ns, json_native, settings_hash
+from imu_square.monitor.history.encoding import datetime_from_ns, json_native, settings_hash
 
 #: The monitor's verdicts on a run (issue 11, section 5).
 EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
@@ -351,7 +351,7 @@ class BaselineRow:
         When it was set; stamped by the store when None. [ns]
     alarm_design : dict
         The alarm charts designed for this baseline
-        (:meth:`~imu_square.monitor.alarms.AlarmDesign.to_json_dict`); empty until
+        (:meth:`~imu_square.monitor.stats.alarms.AlarmDesign.to_json_dict`); empty until
         designed.
     """
 

@@ -8,7 +8,7 @@ References
 
 import numpy as np
 
-from imu_square.pipeline.fit import sine_design
+from imu_square.pipeline.sine_fit import sine_design
 from imu_square.units import MM, URAD
 
 _COLOURS = {"ccw": "tab:blue", "cw": "tab:orange", "mean": "black"}

@@ -5,7 +5,7 @@ The monitor stores the run in its history first and then calls
 lose the history write. :func:`send_alerts`:
 
 1. delivers what earlier runs left in the outbox (:func:`deliver_pending`);
-2. makes the alert (:func:`~imu_square.monitor.alert_types.make_alert`) and,
+2. makes the alert (:func:`~imu_square.monitor.alerts.alert.make_alert`) and,
    for each sink whose ``states`` hold tonight's state, writes it to the
    outbox before the first try (a process killed mid-delivery loses nothing);
 3. tries the sinks in parallel, each up to ``attempts`` times with
@@ -33,8 +33,8 @@ from pathlib import Path
 
 from imu_square.errors import MonitorError
 from imu_square.log import logger
-from imu_square.monitor import alert_outbox as outbox
-from imu_square.monitor.alert_types import DeliveryError, make_alert
+from imu_square.monitor.alerts import outbox
+from imu_square.monitor.alerts.alert import DeliveryError, make_alert
 
 
 @dataclass(frozen=True)
@@ -122,11 +122,11 @@ def send_alerts(config, record, *, machine_id, state, verdict, outbox_dir=None, 
         The ``[alerts]`` section.
     record : dict
         The run's record, JSON-ready (see
-        :func:`~imu_square.monitor.alert_types.json_ready`).
+        :func:`~imu_square.monitor.alerts.alert.json_ready`).
     machine_id : str
         The machine's id.
     state : str
-        One of :data:`~imu_square.monitor.alert_types.STATES`.
+        One of :data:`~imu_square.monitor.alerts.alert.STATES`.
     verdict : str
         The one-line verdict.
     outbox_dir : str or Path, optional

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from imu_square.monitor.encoding import datetime_from_ns
+from imu_square.monitor.history.encoding import datetime_from_ns
 from imu_square.units import URAD
 
 _STATE_STYLE = {

@@ -36,7 +36,7 @@ The user asks for one false alarm in ``arl0_nights`` valid nights (one in
 two years of nights: 730). Every limit is computed, not looked up: the
 Shewhart limit from the law's quantile, the EWMA and CUSUM limits by
 ``brentq`` on their ARLs from the integral equations of
-:mod:`imu_square.monitor.arl`.
+:mod:`imu_square.monitor.stats.arl`.
 
 The three charts fire on partly the same nights, so the scheme's rate is
 less than the sum of theirs. The split rule: chart ``i`` gets the rate
@@ -56,7 +56,7 @@ past its alarm limit. The warning limits are designed for the fraction of
 in-control nights the user accepts in that state (``warning_fraction``,
 default 2 %, about a week of nights a year): each chart gets its share of it,
 computed from its statistic's quasi-stationary law (long after a start,
-without an alarm; :meth:`~imu_square.monitor.arl.Ewma.occupancy`), and the
+without an alarm; :meth:`~imu_square.monitor.stats.arl.Ewma.occupancy`), and the
 overlap of the charts' warnings is measured and allowed for as for the
 alarms. A warning ARL would not do: an EWMA or a CUSUM with a small ``k``
 lingers past a limit once it has crossed it, and a warning ARL0 of a tenth
@@ -91,7 +91,7 @@ The design therefore takes the baseline's relative error
 ``baseline_sd_ratio = u_baseline / sigma`` (``1/sqrt(N)`` for a baseline
 that is the mean of N runs like tonight's) and computes every limit so that
 the false-alarm rate *averaged over the baseline's error* meets the asked
-one (Gauss–Legendre average over ``e``, :func:`~imu_square.monitor.arl.baseline_average`).
+one (Gauss–Legendre average over ``e``, :func:`~imu_square.monitor.stats.arl.baseline_average`).
 The monitor should use this, with ``z = Delta / u``: it is the only option
 that controls the rate the user asked for, and it states the price
 (slower detection, and a CUSUM that cannot be tuned below the baseline's
@@ -114,7 +114,7 @@ from scipy import special, stats
 
 from imu_square.errors import MonitorError
 from imu_square.log import logger
-from imu_square.monitor.arl import (
+from imu_square.monitor.stats.arl import (
     Cusum,
     Ewma,
     NightLaw,
@@ -123,8 +123,8 @@ from imu_square.monitor.arl import (
     solve_limit,
     solve_warning,
 )
-from imu_square.monitor.arl import quadrature_error as _quadrature_error
-from imu_square.monitor.charts import (
+from imu_square.monitor.stats.arl import quadrature_error as _quadrature_error
+from imu_square.monitor.stats.charts import (
     CHARTS,
     ChartLimits,
     NightSampler,
@@ -297,12 +297,12 @@ class AlarmDesign:
 
     @property
     def charts(self):
-        """The three :class:`ChartDesign` in :data:`~imu_square.monitor.charts.CHARTS` order."""
+        """The three :class:`ChartDesign` in :data:`.charts.CHARTS` order."""
         return (self.shewhart, self.ewma, self.cusum)
 
     @property
     def limits(self):
-        """The alarm limits as :class:`~imu_square.monitor.charts.ChartLimits`."""
+        """The alarm limits as :class:`~imu_square.monitor.stats.charts.ChartLimits`."""
         return ChartLimits(
             self.shewhart.limit,
             self.ewma.parameter,
@@ -313,7 +313,7 @@ class AlarmDesign:
 
     @property
     def warnings(self):
-        """The warning limits as :class:`~imu_square.monitor.charts.ChartLimits`."""
+        """The warning limits as :class:`~imu_square.monitor.stats.charts.ChartLimits`."""
         return ChartLimits(
             self.shewhart.warning_limit,
             self.ewma.parameter,

@@ -15,9 +15,9 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from imu_square.monitor.alert_types import DEFAULT_ALERT_STATES, STATES, DeliveryError
-from imu_square.monitor.atomic import write_atomic
-from imu_square.monitor.locking import locked
+from imu_square.io.atomic import write_atomic
+from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError
+from imu_square.monitor.alerts.locking import locked
 
 JSON_FILE_MODES = ("latest", "append")
 JSON_FILE_FIELDS = ("name", "states", "path", "mode")

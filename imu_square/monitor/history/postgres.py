@@ -27,7 +27,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from imu_square.errors import HistoryError
-from imu_square.monitor.encoding import first_line
+from imu_square.monitor.history.encoding import first_line
 
 
 def redact(url):

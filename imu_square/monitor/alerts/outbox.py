@@ -23,9 +23,9 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from imu_square.monitor.alert_types import Alert
-from imu_square.monitor.atomic import fsync_dir, write_atomic
-from imu_square.monitor.locking import try_lock
+from imu_square.io.atomic import fsync_dir, write_atomic
+from imu_square.monitor.alerts.alert import Alert
+from imu_square.monitor.alerts.locking import try_lock
 
 OUTBOX_SCHEMA = "imu-square.outbox/1"
 REJECTED = "rejected"

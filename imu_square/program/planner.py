@@ -10,7 +10,7 @@ estimator's measured efficiency ``e``::
 
 with ``A = v^2/r``, ``T`` the analysed time (whole cycles of both directions),
 ``d`` the white-noise density, ``fc`` the 1/f corner (the simulator's and a
-MEMS sensor's spectrum ``d^2 (1 + fc/f)``, :mod:`imu_square.simulate.noise`),
+MEMS sensor's spectrum ``d^2 (1 + fc/f)``, :mod:`imu_square.simulate.sensor_noise`),
 ``q`` the ADC step at sample rate ``fs``. For a sinusoid in stationary
 Gaussian noise the bound on its phase depends on the noise spectrum at its
 frequency only (Whittle); with 1/f noise the white-noise bound ``sqrt(2) d /

@@ -11,10 +11,10 @@ ballbar's value, or the two face-diagonal lengths of an ISO 230-6 laser test.
 import math
 
 from imu_square.errors import ImuSquareError
-from imu_square.monitor.baseline import BaselineError, compute_baseline
-from imu_square.monitor.evaluate import run_value
+from imu_square.monitor.history.rows import AnchorRow, BaselineRow
 from imu_square.monitor.night import analyse_recording, run_row, stored_design
-from imu_square.monitor.rows import AnchorRow, BaselineRow
+from imu_square.monitor.stats.baseline import BaselineError, compute_baseline
+from imu_square.monitor.verdict import run_value
 from imu_square.units import MM, URAD
 
 # A machine tool squareness beyond 1 mm/m is a unit mistake, not a machine. [µm/m]

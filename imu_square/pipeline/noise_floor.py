@@ -9,7 +9,7 @@ least the variance ``S(f0) / (A^2 T)`` per axis (for long ``T``), so
 
 which is ``sqrt(2) d / (A sqrt(T))`` for white noise of density ``d``
 (``docs/model.md``). A MEMS sensor's noise also has a 1/f part: with the
-simulator's model ``S(f) = d^2 (1 + f_k / f)`` (:mod:`imu_square.simulate.noise`,
+simulator's model ``S(f) = d^2 (1 + f_k / f)`` (:mod:`imu_square.simulate.sensor_noise`,
 corner ``f_k``) the bound grows by ``sqrt(1 + f_k / f0)``: twice the white
 bound for the paper's 0.16 Hz circle and a 0.5 Hz corner.
 :func:`squareness_noise_floor` gives it for a planned test;

@@ -1,0 +1,1 @@
+"""Alerts: what a night sends, its sinks (webhook, e-mail, JSON file, log), their delivery."""
