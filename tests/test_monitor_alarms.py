@@ -19,7 +19,7 @@ from imu_square.monitor.stats.alarms import (
     AlarmDesign,
     baseline_effect,
     design_alarms,
-    evaluate,
+    run_charts,
     to_design_law,
 )
 from imu_square.monitor.stats.arl import (
@@ -466,7 +466,7 @@ def test_design_refuses_bad_parameters(kwargs, message):
         design_alarms(args.pop("arl0_nights"), args.pop("sigma_rad"), **args)
 
 
-# --- Evaluation -----------------------------------------------------------------------------
+# --- ChartRun -----------------------------------------------------------------------------
 
 
 def test_evaluation_fires_on_the_expected_nights(design):
@@ -481,7 +481,7 @@ def test_evaluation_fires_on_the_expected_nights(design):
     first_ewma = math.floor(math.log(1 - ew.limit / level) / math.log(1 - lam)) + 1
     expected = min(first_cusum, first_ewma)
     nights = np.full(40, level * u)
-    ev = evaluate(design, nights, np.full(40, u), nu=None)
+    ev = run_charts(design, nights, np.full(40, u), nu=None)
     alarm_nights = ev.alarm_nights
     assert alarm_nights[0] == expected - 1  # night indices start at 0
     which = ev.points[expected - 1].alarms
@@ -500,24 +500,24 @@ def test_evaluation_of_a_single_jump_and_the_t_mapping(design):
     u = 4 * URAD
     change = np.zeros(10)
     change[6] = -1.01 * design.shewhart.limit * u
-    ev = evaluate(design, change, np.full(10, u))
+    ev = run_charts(design, change, np.full(10, u))
     assert ev.alarm_nights == (6,)
     assert ev.points[6].alarms[0] == "shewhart" and ev.points[6].direction == -1
     assert ev.points[7].ewma == 0.0 and ev.points[7].cusum_neg == 0.0  # restarted
     assert ev.state == "ok"
     # A night with 4 degrees of freedom: its z is mapped onto the design's normal law.
-    ev = evaluate(design, [3 * u], [u], nu=4)
+    ev = run_charts(design, [3 * u], [u], nu=4)
     assert_allclose(ev.points[0].z, stats.norm.isf(stats.t.sf(3, 4)), rtol=1e-12)
     assert ev.points[0].z < 2.6
     # A night with the design's law is charted as it is.
-    assert evaluate(design, [3 * u], [u], nu=[None]).points[0].z == pytest.approx(3.0)
-    assert evaluate(design, [], []).state == "ok"
+    assert run_charts(design, [3 * u], [u], nu=[None]).points[0].z == pytest.approx(3.0)
+    assert run_charts(design, [], []).state == "ok"
     assert json.dumps(ev.to_json_dict(), allow_nan=False)
 
 
 def test_evaluation_matches_the_vectorised_statistics_when_quiet(design):
     z = np.random.default_rng(20).normal(0, 0.5, 60)
-    ev = evaluate(design, z * URAD, np.full(60, URAD))
+    ev = run_charts(design, z * URAD, np.full(60, URAD))
     assert not ev.alarm_nights
     ewma, cpos, cneg = chart_statistics(z, design.ewma.parameter, design.cusum.parameter)
     assert_allclose([p.ewma for p in ev.points], ewma, atol=1e-12)
@@ -552,7 +552,7 @@ def test_mapping_onto_the_design_law_keeps_each_nights_tail_probability():
 )  # fmt: skip
 def test_evaluation_refuses_bad_nights(design, args, message):
     with pytest.raises(MonitorError, match=message):
-        evaluate(design, *args)
+        run_charts(design, *args)
 
 
 def test_far_shifts_and_poor_baselines_stay_finite():

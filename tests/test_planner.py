@@ -20,8 +20,8 @@ from imu_square.program.planner import (
     Limits,
     PlanError,
     SensorSpec,
-    evaluate,
     plan_test,
+    predict,
     servo_leak,
     sigma_run,
 )
@@ -248,7 +248,7 @@ def test_evaluate_says_what_a_given_program_resolves():
     # the paper's test (2 x 15 cycles) with the paper's sensor: 70 urad / sqrt(e) per run;
     # a 0.5 urad target is far out of reach: (z sigma_change / target)^2 times the cycles
     limits = Limits(0.1, 0.1, 0.2, 400.0, (2e-3, 2e-3))
-    plan = evaluate(PAPER, SensorSpec(D7), limits, Goal(100 * URAD, 0.95, 4))
+    plan = predict(PAPER, SensorSpec(D7), limits, Goal(100 * URAD, 0.95, 4))
     assert plan.servo_leak_rad == 0.0  # equal lags: no ellipse
     assert plan.sigma_run_rad == pytest.approx(sigma_run(PAPER, SensorSpec(D7)), rel=1e-12)
     assert plan.sigma_change_rad == pytest.approx(plan.sigma_run_rad * math.sqrt(1.25))

@@ -53,7 +53,7 @@ def run(args):
     import math
 
     from imu_square.monitor.history.encoding import ns_from_datetime
-    from imu_square.monitor.night import assess_history, night_record
+    from imu_square.monitor.night import judge_history, night_record
     from imu_square.monitor.verdict import iso, verdict
     from imu_square.units import URAD
 
@@ -67,7 +67,7 @@ def run(args):
             path = history.backup(args.backup)
             print(f"backed up {history.location} to {path}", file=sys.stderr)
             return 0
-        assessment = assess_history(config, history)
+        assessment = judge_history(config, history)
         start = None if since is None else ns_from_datetime(since)
         nights = [
             n

@@ -221,10 +221,10 @@ def _finite(x):
 def _judge_all(config, history, summary):
     """Judge every run in recording-time order and store the verdicts."""
     from imu_square.monitor.history.rows import EvaluationRow
-    from imu_square.monitor.night import assess_history
+    from imu_square.monitor.night import judge_history
     from imu_square.monitor.verdict import iso
 
-    assessment = assess_history(config, history)
+    assessment = judge_history(config, history)
     base = assessment.baseline_row
     start = -1 if base is None else (base.first_run_at_ns or 0)
     with history.transaction():

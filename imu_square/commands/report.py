@@ -24,13 +24,13 @@ def register(sub):
 def run(args):
     """Judge the history and write the page."""
     from imu_square.io.output import check_output_path
-    from imu_square.monitor.night import assess_history
+    from imu_square.monitor.night import judge_history
     from imu_square.monitor.publish import last_valid_result
     from imu_square.monitor.report.html import render_report, write_report
 
     check_output_path(args.output, overwrite=True)
     with monitor_session(args.config) as (config, history):
-        assessment = assess_history(config, history)
+        assessment = judge_history(config, history)
         last, title = last_valid_result(assessment, config.analysis.options())
         write_report(args.output, render_report(assessment, last, title))
     print(f"wrote {args.output}", file=sys.stderr)

@@ -18,7 +18,7 @@ from imu_square.errors import AnalysisError, ImuSquareError
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.history.rows import EvaluationRow, RunRow
 from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
-from imu_square.monitor.verdict import assess, design_for, iso, verdict
+from imu_square.monitor.verdict import design_for, iso, judge_runs, verdict
 from imu_square.units import MM_PER_MIN, URAD
 
 
@@ -225,7 +225,7 @@ def stored_design(history, baseline_row, settings):
     return design
 
 
-def assess_history(config, history):
+def judge_history(config, history):
     """A machine's whole history judged against its current baseline.
 
     Parameters
@@ -257,7 +257,7 @@ def assess_history(config, history):
     current = None if baseline_row is None else baseline_row.id
     earlier = {e.run_id: e for e in history.evaluations(machine) if e.baseline_id != current}
     runs = history.runs(machine, settings_hash=settings)
-    return assess(runs, baseline_row, design, anchors, earlier)
+    return judge_runs(runs, baseline_row, design, anchors, earlier)
 
 
 def judge_recording(config, history, path, program=None, complete=True):
@@ -306,7 +306,7 @@ def judge_stored(config, history, run_id, inserted=True, result=None):
     -------
     NightOutcome
     """
-    assessment = assess_history(config, history)
+    assessment = judge_history(config, history)
     baseline_row = assessment.baseline_row
     night = assessment.night_of(run_id)
     if night.state == "stale_baseline" and baseline_row is not None and not baseline_row.stale:

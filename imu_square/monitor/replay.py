@@ -10,7 +10,7 @@ stored one by one (a transaction each), so an interrupted replay loses at
 most the files in flight and the next call skips what is stored: a file is
 skipped when its SHA-256 is in the history already under the same analysis
 settings. Once every file is in, the verdicts are recomputed over the whole
-history in recording-time order (:func:`~.night.assess_history`), so they do
+history in recording-time order (:func:`~.night.judge_history`), so they do
 not depend on the order the files finished in, nor on the number of workers.
 """
 

@@ -1,6 +1,6 @@
 """The verdict on a machine's nights: from its history to a state, a change and the charts.
 
-One function, :func:`assess`, reads a machine's history (its current baseline,
+One function, :func:`judge_runs`, reads a machine's history (its current baseline,
 the valid runs since it, the anchors) and gives every night since the baseline
 its change (:mod:`.baseline`), the alarm charts' view of it (:mod:`.alarms`)
 and a state:
@@ -215,7 +215,7 @@ def design_for(baseline_row, runs, settings):
     )
 
 
-def assess(runs, baseline_row, design, anchors=(), earlier=None):
+def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
     """Judge every run of a machine against its current baseline.
 
     The baseline's own runs are its nights; runs recorded before its first run
@@ -243,7 +243,7 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
     -------
     Assessment
     """
-    from imu_square.monitor.stats.alarms import evaluate
+    from imu_square.monitor.stats.alarms import run_charts
     from imu_square.monitor.stats.baseline import remount_tolerance
 
     machine_id = runs[0].machine_id if runs else ""
@@ -307,7 +307,7 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
         changes.append(change)
     if charted:
         c = abs(baseline.cos_2eps_c)
-        evaluation = evaluate(
+        chart_run = run_charts(
             design,
             [ch.change_rad for ch in changes],
             [v.u_squareness_rad / c for _, v, _, _ in charted],
@@ -315,7 +315,7 @@ def assess(runs, baseline_row, design, anchors=(), earlier=None):
         )
         alarm_since = None
         for (r, _, drift, corrected), ch, point in zip(
-            charted, changes, evaluation.points, strict=True
+            charted, changes, chart_run.points, strict=True
         ):
             notes = ["corrected for the sensor's thermal drift"] if corrected else []
             state = point.state

@@ -167,7 +167,7 @@ def outlier_fractions(mean_fit):
     return out
 
 
-def assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor, filtered):
+def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor, filtered):
     """Quality flags of a result that stands, each oddity with a line a machinist can act on.
 
     Parameters

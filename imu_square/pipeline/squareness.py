@@ -167,7 +167,9 @@ def analyze(recording, options=None, program=None):
     k = coverage_factor(cycles.n_pairs - 1, opts.coverage_probability)
     floor = noise_floor(data, seg, cyc, mean, recording.sensor)
     outliers = q.outlier_fractions(mean)
-    quality = q.assess(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_sq, floor, data)
+    quality = q.quality_flags(
+        recording, seg, cyc, clipped, amplitude_ratio, outliers, u_sq, floor, data
+    )
     for w in quality["warnings"]:
         logger.debug("quality: %s", w)
 

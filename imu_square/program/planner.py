@@ -594,7 +594,7 @@ def _z(confidence):
     return float(stats.norm.ppf(0.5 + confidence / 2))
 
 
-def evaluate(program, sensor, limits, goal, efficiency=ESTIMATOR_EFFICIENCY):
+def predict(program, sensor, limits, goal, efficiency=ESTIMATOR_EFFICIENCY):
     """What a given program resolves.
 
     Parameters
@@ -614,10 +614,10 @@ def evaluate(program, sensor, limits, goal, efficiency=ESTIMATOR_EFFICIENCY):
     -------
     Plan
     """
-    return _evaluate(program, sensor, limits, goal, efficiency, _z(goal.confidence))
+    return _predict(program, sensor, limits, goal, efficiency, _z(goal.confidence))
 
 
-def _evaluate(program, sensor, limits, goal, efficiency, z):
+def _predict(program, sensor, limits, goal, efficiency, z):
     sigma = sigma_run(program, sensor, efficiency)
     crb = sigma * math.sqrt(efficiency)
     sigma_change = sigma * math.sqrt(1 + 1 / goal.baseline_runs)
@@ -748,7 +748,7 @@ def plan_test(sensor, limits, goal, efficiency=ESTIMATOR_EFFICIENCY):
     check_inputs(sensor, limits, goal)
     z = _z(goal.confidence)
     plans = [
-        _evaluate(program, sensor, limits, goal, efficiency, z)
+        _predict(program, sensor, limits, goal, efficiency, z)
         for program in _candidates(limits, sensor, goal)
     ]
     if not plans:

@@ -799,7 +799,7 @@ class ChartPoint:
 
 
 @dataclass(frozen=True)
-class Evaluation:
+class ChartRun:
     """The charts over a machine's valid nights since the baseline.
 
     Attributes
@@ -825,7 +825,7 @@ class Evaluation:
         return {"state": self.state, "points": [p.to_json_dict() for p in self.points]}
 
 
-def evaluate(design, change_rad, u_change_rad, nu=None):
+def run_charts(design, change_rad, u_change_rad, nu=None):
     """Run the designed charts over a machine's valid nights.
 
     Parameters
@@ -844,7 +844,7 @@ def evaluate(design, change_rad, u_change_rad, nu=None):
 
     Returns
     -------
-    Evaluation
+    ChartRun
         Night by night: ``z`` (mapped onto the design's law when the night's
         ``nu`` differs), the statistics, the charts past their limits, and
         the state. The charts restart from zero on the night after an alarm.
@@ -905,7 +905,7 @@ def evaluate(design, change_rad, u_change_rad, nu=None):
         )
         # Restart from zero after an alarm; otherwise carry the statistics on.
         state = None if fired else (np.array(ewma), np.array(cpos), np.array(cneg))
-    return Evaluation(points=tuple(points))
+    return ChartRun(points=tuple(points))
 
 
 def _night_nus(nu, n):
