@@ -8,20 +8,17 @@ reads it back record by record (up to the first damage, through
 rewrites what a cut file holds as a whole file.
 """
 
-from imu_square.io.mcap.reader import McapContents, RecoveryReport, read_mcap, scan_mcap
+from imu_square.io.mcap.reader import read_mcap, scan_mcap
 from imu_square.io.mcap.recovery import recover_mcap
 from imu_square.io.mcap.summary import summarize
-from imu_square.io.mcap.topics import ACCEL_TOPIC, EVENTS_TOPIC, PREVIEW_TOPIC, PROGRAM_ATTACHMENT
+from imu_square.io.mcap.topics import ACCEL_TOPIC, EVENTS_TOPIC, PREVIEW_TOPIC
 from imu_square.io.mcap.writer import RecordingWriter, batch_layout, write_mcap
 
 __all__ = [
     "ACCEL_TOPIC",
     "EVENTS_TOPIC",
     "PREVIEW_TOPIC",
-    "PROGRAM_ATTACHMENT",
-    "McapContents",
     "RecordingWriter",
-    "RecoveryReport",
     "batch_layout",
     "read_mcap",
     "recover_mcap",
