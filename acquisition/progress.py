@@ -12,7 +12,7 @@ BAR_WIDTH = 24
 
 
 def describe(status):
-    """One line about a :class:`~acquisition.recorder.RecorderStatus`.
+    """One line about a :class:`~acquisition.status.RecorderStatus`.
 
     Parameters
     ----------
@@ -38,7 +38,7 @@ def describe(status):
 
 
 class ProgressPrinter:
-    """Callable that shows a :class:`~acquisition.recorder.RecorderStatus`.
+    """Callable that shows a :class:`~acquisition.status.RecorderStatus`.
 
     Parameters
     ----------

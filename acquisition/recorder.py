@@ -32,26 +32,26 @@ import math
 import queue
 import threading
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 
+from acquisition.link import LinkHealth
 from acquisition.protocol import (
     REQUEST_HEADER,
     SEQ_MODULUS,
-    DeviceHeader,
     Marker,
     Parser,
     SampleBlock,
 )
 from acquisition.reader import SerialSupervisor
+from acquisition.status import RecorderState, RecorderStatus
 from acquisition.stream import SampleStream
 from acquisition.trigger import make_trigger
 from imu_square.errors import AcquisitionError, ImuSquareError, OutputError, OutputWriteError
 from imu_square.io.mcap import RecordingWriter, scan_mcap
 from imu_square.io.output import check_free_space, check_output_path
 from imu_square.io.recording import Event, SensorInfo
-from imu_square.io.runlog import parse_detail, run_is_complete, run_problems
+from imu_square.io.runlog import parse_detail
 from imu_square.log import logger
 
 HEADER_TIMEOUT_S = 5.0
@@ -60,9 +60,7 @@ FLUSH_INTERVAL_S = 1.0
 PRETRIGGER_S = 3.0
 CHUNK_SIZE = 64 * 1024
 MARKER_MARGIN_S = 2.0
-SILENCE_S = 2.0  # host time without samples after which board time is extrapolated [s]
 SILENCE_TIMEOUT_S = 10.0  # host time without samples after which the board is given up [s]
-RATE_SPAN_S = 0.5  # host time of samples needed to measure the board's rate [s]
 # Upper bound of the file's size per sample: the uncompressed chunks hold 20 B per sample
 # at 1 kHz (24 B with a temperature; 14-18 B at 4 kHz) and zstd gives ~16 B on noisy data.
 MAX_BYTES_PER_SAMPLE = 25
@@ -115,83 +113,6 @@ def parse_block_marker(text):
     ):
         return parts[0], parts[1], int(parts[2]), ""
     return "marker", "", -1, text
-
-
-@dataclass
-class RecorderStatus:
-    """What the recorder has done so far; a snapshot goes to the progress callback.
-
-    Attributes
-    ----------
-    state : str
-        ``"waiting for header"``, ``"waiting for trigger"``, ``"recording"`` or
-        ``"stopped"``.
-    samples_written : int
-        Samples in the file.
-    lost : int
-        Samples missing from the file between its first and last sample.
-    gaps : int
-        Gap events written.
-    crc_errors : int
-        Frames or lines rejected by the parser since the trigger.
-    resyncs : int
-        Times the parser found its framing again since the trigger.
-    reconnects : int
-        Times the port was reopened since the trigger.
-    stale_blocks : int
-        Blocks dropped because their sequence number did not move forward.
-    recorded_s : float
-        Board time from the trigger to the newest sample. [s]
-    expected_s : float
-        Board time from the trigger to the stop condition; the program's
-        duration when open-ended; NaN before the trigger. [s]
-    rate_hz : float
-        Samples per second of host time, measured over the run. [Hz]
-    elapsed_s : float
-        Host time since the recorder started. [s]
-    stop_reason : str
-        ``"duration"`` or ``"done"`` (as planned), ``"interrupted"``, ``"port lost"``
-        (it stayed lost), ``"board silent"`` (no samples), ``"board restarted"``,
-        ``"error"``, ``"output error"`` (writing failed), or ``""`` while running.
-    lost_at_end : int
-        Samples missing after the last one received, up to where the recorder
-        stopped, when the board went away (included in ``lost``).
-    """
-
-    state: str = "waiting for header"
-    samples_written: int = 0
-    lost: int = 0
-    gaps: int = 0
-    crc_errors: int = 0
-    resyncs: int = 0
-    reconnects: int = 0
-    stale_blocks: int = 0
-    recorded_s: float = 0.0
-    expected_s: float = math.nan
-    rate_hz: float = math.nan
-    elapsed_s: float = 0.0
-    stop_reason: str = ""
-    lost_at_end: int = 0
-    header: DeviceHeader | None = field(default=None, repr=False)
-
-    @property
-    def complete(self):
-        """True for a run that stopped as planned with nothing lost, rejected or reconnected."""
-        return run_is_complete(self.stop_reason, self.lost, self.crc_errors, self.reconnects)
-
-    @property
-    def problems(self):
-        """Why the run is incomplete, one phrase per reason (empty when complete)."""
-        dt_s = self.header.dt_ns * 1e-9 if self.header is not None else math.nan
-        return run_problems(
-            self.stop_reason,
-            self.lost,
-            self.crc_errors,
-            self.reconnects,
-            self.lost_at_end,
-            self.lost_at_end * dt_s,
-            self.stop_reason,
-        )
 
 
 class Recorder:
@@ -326,19 +247,11 @@ class Recorder:
         self._stop_reason_pending = ""
         self._pending = collections.deque()  # (seq, "samples" | "event", payload)
         self._parser_events = []
-        self._reconnect_detail = None
-        self._down_since = None
-        self._connects = 0
-        self._first_data = None
-        self._last_data = None
-        self._samples_received = 0
+        self._link = LinkHealth(self.port, self.silence_timeout_s)
         self._seq_first = None
         self._last_written = None
         self._t_start_ns = None
-        self._alive = None  # [(host s, seq) of the first, of the last samples received]
-        self._silent_since = None  # host time of the last sample (or the first header) [s]
         self._tail = None  # (end seq, cause) of the missing tail when the board went away
-        self._header_seen = False  # a header from our board arrived on this connection
         self._output_failure = None
         self._supervisor.start()
         try:
@@ -390,26 +303,19 @@ class Recorder:
                 self._on_data(payload, host_ns)
             elif kind == "connect":
                 self._on_connect(host_ns)
-            elif self._down_since is None:
-                self._down_since = host_ns
+            else:
+                self._link.disconnected(host_ns)
 
     # -- link and parser -------------------------------------------------------------------
 
     def _on_connect(self, host_ns):
-        self._header_seen = False
+        self._link.connected(host_ns)
         header = self.status.header
         self._parser = Parser(self.mode or (header.mode if header is not None else None))
         self._supervisor.write(REQUEST_HEADER)
-        if self._connects:
-            down_ns = host_ns - (self._down_since if self._down_since is not None else host_ns)
-            self._reconnect_detail = f"down_s={down_ns * 1e-9:.3f}"
-            self._down_since = None
-        self._connects += 1
 
     def _on_data(self, data, host_ns):
-        if self._first_data is None:
-            self._first_data = host_ns
-        self._last_data = host_ns
+        self._link.data(host_ns)
         stats = self._parser.stats
         errors, resyncs = stats.errors, stats.resyncs
         samples = stats.samples_ok
@@ -437,26 +343,16 @@ class Recorder:
                 self._on_header(message)
         if run and not self.status.stop_reason:
             self._on_samples(run)
-        if stats.samples_ok > samples and self._header_seen:
-            self._note_samples(host_ns * 1e-9)
-
-    def _note_samples(self, host_s):
-        """Samples arrived at ``host_s``: the board is alive, and its rate can be measured."""
-        seq = self._stream.last_seq
-        if seq is None:
-            return
-        if self._alive is None:
-            self._alive = [(host_s, seq), (host_s, seq)]
-        self._alive[1] = (host_s, seq)
-        self._silent_since = host_s
+        if stats.samples_ok > samples and self._link.header_seen:
+            self._link.samples_arrived(host_ns * 1e-9, self._stream.last_seq)
 
     def _on_header(self, header):
         old = self.status.header
         if old is None:
-            self._silent_since = time.monotonic()
+            self._link.first_header(time.monotonic(), header.sample_rate_hz)
             self._check_space(header)
             self.status.header = header
-            self.status.state = "waiting for trigger"
+            self.status.enter(RecorderState.WAITING_FOR_TRIGGER)
             self._stream = SampleStream(header.scale_m_s2_per_count)
             self._trigger = make_trigger(
                 self.trigger_kind, header.dt_ns * 1e-9, header.scale_m_s2_per_count
@@ -478,12 +374,14 @@ class Recorder:
                 _identity(old),
                 _identity(header),
             )
-            self._board_gone(self._board_at(time.monotonic() - self._silent_since), "board changed")
+            self._board_gone(
+                self._link.board_at(time.monotonic(), self._stream.last_seq), "board changed"
+            )
             return
-        self._header_seen = True
+        self._link.header_seen = True
 
     def _on_samples(self, blocks):
-        if not self._header_seen:
+        if not self._link.header_seen:
             return  # before a header on this connection: which board, at what scale?
         if len(blocks) == 1:
             counts = blocks[0].counts
@@ -503,17 +401,14 @@ class Recorder:
         s0 = int(seq[0])
         if lost:
             self._queue_event(s0, "gap", detail=self._gap_detail(lost))
-        if self._reconnect_detail is not None:
-            self._queue_event(s0, "reconnect", detail=self._reconnect_detail)
-            self._reconnect_detail = None
+        reconnect = self._link.take_reconnect()
+        if reconnect is not None:
+            self._queue_event(s0, "reconnect", detail=reconnect)
         for kind, detail in self._parser_events:
             self._queue_event(s0, kind, detail=detail)
         self._parser_events = []
         self._pending.append((s0, "samples", (seq, accel, temperature, time.time_ns())))
-        self._samples_received += seq.size
-        if self._last_data > self._first_data:
-            span_s = (self._last_data - self._first_data) * 1e-9
-            self.status.rate_hz = self._samples_received / span_s
+        self.status.rate_hz = self._link.count_samples(seq.size)
         if self._trigger_seq is None:
             fired = self._trigger.update(seq, accel)
             if fired is None:
@@ -537,7 +432,7 @@ class Recorder:
         self.status.stop_reason = "board restarted"
 
     def _on_marker(self, marker):
-        if not self._header_seen or self._stream.last_seq is None:
+        if not self._link.header_seen or self._stream.last_seq is None:
             return
         seq = self._stream.unwrap(marker.seq)
         kind, direction, block, detail = parse_block_marker(marker.text)
@@ -573,7 +468,7 @@ class Recorder:
         """
         dt = self.status.header.dt_ns
         self._trigger_seq = trigger_seq
-        self.status.state = "recording"
+        self.status.enter(RecorderState.RECORDING)
         first = trigger_seq - self._samples(self.pretrigger_s)
         blocks = [p for s, k, p in self._pending if k == "samples" and p[0][-1] >= first]
         if blocks:
@@ -674,52 +569,14 @@ class Recorder:
 
     # -- a board that goes away ------------------------------------------------------------
 
-    def _board_rate(self):
-        """Board samples per host second: measured once samples span a while, else nominal.
-
-        Measured from the end of the first read, which may hold a backlog; the
-        nominal rate is the header's, right for any real board (an emulated one
-        may run faster than real time).
-        """
-        if self._alive is not None:
-            (t0, s0), (t1, s1) = self._alive
-            if t1 - t0 >= RATE_SPAN_S:
-                return (s1 - s0) / (t1 - t0)
-        return self.status.header.sample_rate_hz
-
     def _check_silence(self, now):
-        """Stop when the board is gone: silent past the planned stop, or past the time-out.
-
-        While silent for more than ``SILENCE_S`` the board's sample counter is
-        estimated from the host clock; once it passes the planned stop, nothing
-        more can come in time. After ``silence_timeout_s`` the board is given up
-        at once. Either way what is missing up to there becomes the tail gap.
-        """
-        if self._silent_since is None or self.status.stop_reason or not self._queue.empty():
+        """Stop when the board is gone; what is missing up to there becomes the tail gap."""
+        if self.status.stop_reason or not self._queue.empty():
             return
-        silent_s = now - self._silent_since
-        if silent_s <= min(SILENCE_S, self.silence_timeout_s):
-            return
-        board_at = self._board_at(silent_s)
-        at_stop = None not in (board_at, self._stop_seq) and board_at >= self._stop_seq
-        if silent_s <= self.silence_timeout_s and not at_stop:
-            return
-        cause = "port lost" if self._down_since is not None else "board silent"
-        logger.warning(
-            "no sample from the board on %s for %.1f s (%s): the recording stops, and the "
-            "missing time is recorded as a gap; the run is incomplete",
-            self.port,
-            silent_s,
-            "the port stayed lost" if cause == "port lost" else "the port is open but silent",
-        )
-        self._board_gone(board_at, cause)
-
-    def _board_at(self, silent_s):
-        """Next sample the board would send now, from the host clock; None before any."""
-        last = self._stream.last_seq if self._stream is not None else None
-        if last is None:
-            return None
-        return last + 1 + round(silent_s * self._board_rate())
+        last_seq = self._stream.last_seq if self._stream is not None else None
+        gone = self._link.gone(now, last_seq, self._stop_seq)
+        if gone is not None:
+            self._board_gone(*gone)
 
     def _board_gone(self, board_at, cause):
         """Stop: what is missing up to ``board_at`` (or the planned stop) is the tail gap."""
@@ -824,7 +681,7 @@ class Recorder:
             and self._stream.last_seq is not None
         ):
             self._start(self._stream.last_seq, fired=False)  # stopped while waiting: keep it
-        self.status.state = "stopped"
+        self.status.enter(RecorderState.STOPPED)
         if self._writer is None:
             return
         self._drain()
