@@ -9,7 +9,10 @@ events to a :class:`~imu_square.io.mcap.RecordingWriter`, which it flushes
 (chunk closed, fsync) every second, so a kill or a power cut loses at most
 the last second. A bad sample is never written or interpolated: damaged
 frames are dropped by the parser, counted, and leave a ``gap`` event with the
-number of samples lost (``lost=N,lost_s=T``).
+number of samples lost (``lost=N,lost_s=T``). The link's health (reconnects,
+silence, the host rate) is kept by a :class:`~acquisition.link.LinkHealth`;
+what the recorder reports, with its :class:`~acquisition.status.RecorderState`,
+by a :class:`~acquisition.status.RecorderStatus`.
 
 A board that goes away for good never makes a clean run. When no sample has
 arrived for ``silence_timeout_s`` (the port stayed lost, or the board hung),
