@@ -37,8 +37,9 @@ import math
 import tomllib
 from dataclasses import asdict, dataclass, field, replace
 
-from imu_square.errors import ProgramError, check_option
+from imu_square.errors import ProgramError
 from imu_square.textfile import read_text
+from imu_square.validation import check_option
 
 DIRECTIONS = ("ccw", "cw")
 SUPPORTED_PLANES = ("XY",)

@@ -8,8 +8,9 @@ never silently leaves an effect off.
 import math
 import tomllib
 
-from imu_square.errors import ConfigError, check_option
+from imu_square.errors import ConfigError
 from imu_square.textfile import read_text
+from imu_square.validation import check_option
 
 
 def load_toml(path):

@@ -24,8 +24,9 @@ import re
 from dataclasses import dataclass, field
 
 from imu_square import __version__
-from imu_square.errors import HistoryError, check_option
+from imu_square.errors import HistoryError
 from imu_square.monitor.history.encoding import datetime_from_ns, json_native, settings_hash
+from imu_square.validation import check_option
 
 #: The monitor's verdicts on a run (issue 11, section 5).
 EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
