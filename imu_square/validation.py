@@ -341,6 +341,35 @@ def check_sections(doc, allowed, source, error=ImuSquareError):
         raise error(f"{source}: unknown section [{unknown[0]}]; allowed: {sorted(allowed)}")
 
 
+def read_tables(doc, layout, source, error=ImuSquareError, terse=False):
+    """Every table of a TOML file made of known sections, checked.
+
+    Parameters
+    ----------
+    doc : dict
+        The parsed file.
+    layout : dict of str to dict
+        Each section's fields with their defaults.
+    source : str
+        The file, for messages.
+    error : callable
+        The error to raise.
+    terse : bool
+        See :class:`TomlTable`.
+
+    Returns
+    -------
+    dict of str to TomlTable
+        One per section of ``layout``; a section the file leaves out is an
+        empty table, so that its fields take their defaults.
+    """
+    check_sections(doc, layout, source, error)
+    return {
+        name: TomlTable(doc.get(name, {}), f"[{name}]", fields, source, error=error, terse=terse)
+        for name, fields in layout.items()
+    }
+
+
 def tables(value, where, source, error=ImuSquareError):
     """A section written as one table (``[x]``) or an array of tables (``[[x]]``).
 

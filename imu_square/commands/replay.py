@@ -47,13 +47,11 @@ def _settings(path):
     from imu_square.errors import MonitorConfigError
     from imu_square.monitor.config import AnalysisSettings
     from imu_square.textfile import read_toml
-    from imu_square.validation import TomlTable, check_sections
+    from imu_square.validation import read_tables
 
-    doc = read_toml(path, MonitorConfigError)
-    check_sections(doc, ("analysis",), path, MonitorConfigError)
-    fields = ("cutoff_hz", "order", "bootstrap")
-    t = TomlTable(doc.get("analysis", {}), "[analysis]", fields, path, error=MonitorConfigError)
-    return AnalysisSettings.from_table(t)
+    layout = {"analysis": ("cutoff_hz", "order", "bootstrap")}
+    t = read_tables(read_toml(path, MonitorConfigError), layout, path, MonitorConfigError)
+    return AnalysisSettings.from_table(t["analysis"])
 
 
 class _Progress:
