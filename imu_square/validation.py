@@ -498,7 +498,7 @@ class TomlTable:
             **self._at(key),
         )
 
-    def numbers(self, key, sizes, what, lo=None, hi=None, *, default=REQUIRED):
+    def numbers(self, key, sizes, what, lo=None, hi=None, *, lo_open=False, default=REQUIRED):
         """A list of numbers, each checked like :meth:`number`, as a tuple.
 
         Parameters
@@ -511,6 +511,8 @@ class TomlTable:
             The list as a whole, for the message (``"[x, y] in mm"``).
         lo, hi : float or None
             Each number's range.
+        lo_open : bool
+            Whether ``lo`` itself is excluded.
         default : list, optional
             Value when the field is absent.
 
@@ -521,7 +523,7 @@ class TomlTable:
         values = self.get(key, default)
         if not isinstance(values, list) or len(values) not in sizes:
             self.fail(key, what, values)
-        return tuple(self.number(key, lo, hi, value=v) for v in values)
+        return tuple(self.number(key, lo, hi, lo_open=lo_open, value=v) for v in values)
 
     def integer(self, key, lo=None, hi=None, *, default=REQUIRED, value=_FIELD):
         """A whole number (:func:`check_int`) in ``[lo, hi]``; ``value`` as in :meth:`number`."""
