@@ -1,23 +1,27 @@
 """Checking what users give: one message template and one rule per kind of value.
 
 Plain functions in the manner of statsmodels' ``tools/validation`` and
-MNE-Python's ``utils/check.py``: each takes the value, its name and what is
-allowed, and returns the value normalised (a float, an int, a tuple) or
-raises. Every refusal is one line in one template::
+MNE-Python's ``utils/check.py``: each takes the value and what is allowed, and
+returns the value normalised (a float, an int, ...) or raises. Every refusal
+is one line in one template::
 
     {where}: {name} must be {allowed}, got {value!r}
 
-``where`` is the file (left out for a Python argument), ``name`` the field as
-the user wrote it (``[alerts] backoff_s``) or the parameter, ``allowed`` says
-what is allowed, ``value`` is what came (a number as the float it was read as).
+Every check takes ``name``, the parameter or the field as the user wrote it
+(``"[alerts] backoff_s"``); ``where``, the file (left out for a Python
+argument); and ``error``, the :class:`~imu_square.errors.ImuSquareError`
+subclass to raise (or a callable that makes one from the message). ``kind``
+and ``allowed``, where a check has them, replace its default wording for a
+value of the wrong type and for one out of range.
 
 The rules, the same for every file and every public function:
 
 - a number is a real number: a Python or numpy int or float, or a 0-d array
   of one, never a bool (TOML's ``true`` is not 1.0). It is finite, unless an
-  infinite bound is given closed (``hi=math.inf``);
-- a whole number is a Python or numpy integer, never a bool or a float: TOML
-  tells ``2`` from ``2.0``;
+  infinite bound is given closed (``hi=math.inf``). It is reported as the
+  float it is read as;
+- a whole number is a Python or numpy integer, never a bool or a float (TOML
+  tells ``2`` from ``2.0``, and a float loses nanoseconds);
 - text is a non-blank string with no control characters: it ends up in log
   lines, e-mail headers and file names.
 
@@ -34,7 +38,7 @@ from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 
-REQUIRED = object()  # default meaning "the field must be given"
+_REQUIRED = object()  # default meaning "the field must be given"
 _FIELD = object()  # check the field's own value
 _ENV_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
@@ -44,22 +48,12 @@ def fail(name, allowed, value, where="", error=ImuSquareError):
 
     Parameters
     ----------
-    name : str
-        The parameter or field, e.g. ``"dialect"`` or ``"[program] plane"``.
     allowed : str
         What is allowed, e.g. ``"in (0, 1000]"``.
     value : object
         What was received.
-    where : str
-        Where the value came from, e.g. the file's path; none for an argument.
-    error : callable
-        The :class:`~imu_square.errors.ImuSquareError` subclass to raise (or a
-        callable that makes one from the message).
-
-    Raises
-    ------
-    ImuSquareError
-        Always.
+    name, where, error
+        See the module docstring.
     """
     prefix = f"{where}: " if where else ""
     raise error(f"{prefix}{name} must be {allowed}, got {value!r}")
@@ -68,16 +62,7 @@ def fail(name, allowed, value, where="", error=ImuSquareError):
 def interval(lo=None, hi=None, lo_open=False, hi_open=False):
     """``[lo, hi]``, ``(lo, hi]`` and the like, for messages; None is an open infinity.
 
-    Parameters
-    ----------
-    lo, hi : float or int or None
-        The bounds, in any one unit; an int is written in full, a float with ``:g``.
-    lo_open, hi_open : bool
-        Whether the bound itself is excluded.
-
-    Returns
-    -------
-    str
+    An int bound is written in full, a float one with ``:g``.
     """
 
     def bound(x, inf):
@@ -98,16 +83,7 @@ def _plain(value):
 
 
 def is_number(value):
-    """Whether ``value`` is what :func:`check_number` takes: a real number, not a bool.
-
-    Parameters
-    ----------
-    value : object
-
-    Returns
-    -------
-    bool
-    """
+    """Whether ``value`` is what :func:`check_number` takes: a real number, not a bool."""
     value = _plain(value)
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
@@ -129,25 +105,20 @@ def check_number(
 
     Parameters
     ----------
-    name : str
-        The parameter or field, for the message.
     value : object
         What was given.
     lo, hi : float or None
         Bounds, in the value's own unit; None for none. An infinite bound
-        given closed admits that infinity (``hi=math.inf``: up to and with inf).
+        given closed admits that infinity.
     lo_open, hi_open : bool
         Whether ``lo`` or ``hi`` itself is excluded.
     kind : str, optional
-        What a value of the wrong type is told; default ``"a number in
-        [lo, hi]"``, or ``"a number"`` without a finite bound.
+        Default ``"a number in [lo, hi]"``, or ``"a number"`` with no finite bound.
     allowed : str, optional
-        What a number outside the range is told; default ``"in [lo, hi]"``, or
-        ``"finite"`` for NaN and an infinity the range does not admit.
-    where : str
-        The file, for the message.
-    error : callable
-        The error to raise (see :func:`fail`).
+        Default ``"in [lo, hi]"``, or ``"finite"`` for NaN and an infinity
+        the range does not admit.
+    name, where, error
+        See the module docstring.
 
     Returns
     -------
@@ -160,11 +131,10 @@ def check_number(
     value = float(_plain(value))
     low = -math.inf if lo is None else lo
     high = math.inf if hi is None else hi
-    inside = (value > low if lo_open else value >= low) and (
-        value < high if hi_open else value <= high
-    )
+    above = value > low if lo_open else value >= low
+    below = value < high if hi_open else value <= high
     # an infinity passes only as a bound the caller wrote
-    if inside and (math.isfinite(value) or value in (lo, hi)):
+    if above and below and (math.isfinite(value) or value in (lo, hi)):
         return value
     admits_inf = (lo == -math.inf and not lo_open) or (hi == math.inf and not hi_open)
     finite = math.isfinite(value) or admits_inf
@@ -174,41 +144,17 @@ def check_number(
 def check_int(
     name, value, lo=None, hi=None, *, kind=None, allowed=None, where="", error=ImuSquareError
 ):
-    """A whole number within ``[lo, hi]``, as an int.
+    """A whole number within ``[lo, hi]`` (None: no bound), as an int.
 
-    Parameters
-    ----------
-    name : str
-        The parameter or field, for the message.
-    value : object
-        What was given.
-    lo, hi : int or None
-        Bounds, both allowed; None for none.
-    kind : str, optional
-        What a value of the wrong type is told; default ``"a whole number in
-        [lo, hi]"``, or ``"a whole number"`` without bounds.
-    allowed : str, optional
-        What a whole number outside the range is told; default ``"a whole
-        number in [lo, hi]"``.
-    where : str
-        The file, for the message.
-    error : callable
-        The error to raise (see :func:`fail`).
-
-    Returns
-    -------
-    int
+    ``kind`` and ``allowed`` default to ``"a whole number in [lo, hi]"``
+    (``kind`` to ``"a whole number"`` without bounds); ``name``, ``where`` and
+    ``error`` are as in the module docstring.
     """
     ranged = f"a whole number in {interval(lo, hi)}"
     value = _plain(value)
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        fail(
-            name,
-            kind or (ranged if (lo, hi) != (None, None) else "a whole number"),
-            value,
-            where,
-            error,
-        )
+        unbounded = lo is None and hi is None
+        fail(name, kind or ("a whole number" if unbounded else ranged), value, where, error)
     value = int(value)
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         fail(name, allowed or ranged, value, where, error)
@@ -216,26 +162,7 @@ def check_int(
 
 
 def check_bool(name, value, *, kind="True or False", where="", error=ImuSquareError):
-    """A bool (numpy's too).
-
-    Parameters
-    ----------
-    name : str
-        The parameter or field, for the message.
-    value : object
-        What was given.
-    kind : str
-        What another value is told, in the user's spelling (TOML's is
-        ``"true or false"``).
-    where : str
-        The file, for the message.
-    error : callable
-        The error to raise (see :func:`fail`).
-
-    Returns
-    -------
-    bool
-    """
+    """A bool (numpy's too); ``kind`` in the user's spelling (TOML's: ``"true or false"``)."""
     value = _plain(value)
     if not isinstance(value, bool):
         fail(name, kind, value, where, error)
@@ -243,17 +170,7 @@ def check_bool(name, value, *, kind="True or False", where="", error=ImuSquareEr
 
 
 def has_control_chars(text):
-    """Whether ``text`` holds a control character (CR, LF, NUL, ...; not a plain space).
-
-    Parameters
-    ----------
-    text : str
-        Any text.
-
-    Returns
-    -------
-    bool
-    """
+    """Whether ``text`` holds a control character (CR, LF, NUL, ...; not a plain space)."""
     return any(unicodedata.category(c) in ("Cc", "Zl", "Zp") for c in text)
 
 
@@ -262,8 +179,6 @@ def check_text(name, value, *, empty=False, controls=False, where="", error=ImuS
 
     Parameters
     ----------
-    name : str
-        The parameter or field, for the message.
     value : object
         What was given.
     empty : bool
@@ -271,10 +186,8 @@ def check_text(name, value, *, empty=False, controls=False, where="", error=ImuS
     controls : bool
         Whether control characters other than CR and LF are allowed (a file
         name stored as it was given may hold a tab).
-    where : str
-        The file, for the message.
-    error : callable
-        The error to raise (see :func:`fail`).
+    name, where, error
+        See the module docstring.
 
     Returns
     -------
@@ -292,29 +205,9 @@ def check_text(name, value, *, empty=False, controls=False, where="", error=ImuS
 
 
 def check_option(name, value, allowed, where="", error=ImuSquareError):
-    """One of ``allowed``: the one "must be one of" message.
+    """One of ``allowed``, returned unchanged: the one "must be one of" message.
 
-    Modelled on MNE-Python's ``_check_option(parameter, value, allowed_values,
-    extra="")``: the caller gives the context the message needs, so that no
-    module writes the template by hand.
-
-    Parameters
-    ----------
-    name : str
-        Parameter or field name, e.g. ``"dialect"`` or ``"[program] plane"``.
-    value : object
-        Value received.
-    allowed : iterable
-        Allowed values.
-    where : str
-        Where the value came from, e.g. the file's path.
-    error : callable
-        The error to raise (see :func:`fail`).
-
-    Returns
-    -------
-    object
-        ``value`` unchanged.
+    After MNE-Python's ``_check_option(parameter, value, allowed_values)``.
     """
     allowed = tuple(allowed)
     if value not in allowed:
@@ -323,19 +216,7 @@ def check_option(name, value, allowed, where="", error=ImuSquareError):
 
 
 def check_sections(doc, allowed, source, error=ImuSquareError):
-    """Refuse a TOML file's section that is not one of ``allowed``.
-
-    Parameters
-    ----------
-    doc : dict
-        The parsed file.
-    allowed : iterable of str
-        Its sections.
-    source : str
-        The file, for the message.
-    error : callable
-        The error to raise.
-    """
+    """Refuse a section of the parsed TOML file ``doc`` that is not one of ``allowed``."""
     unknown = sorted(set(doc) - set(allowed))
     if unknown:
         raise error(f"{source}: unknown section [{unknown[0]}]; allowed: {sorted(allowed)}")
@@ -400,6 +281,10 @@ def tables(value, where, source, error=ImuSquareError):
 class TomlTable:
     """One table of a TOML file, with typed, range-checked fields.
 
+    Each getter takes the field's name (``key``) and a ``default`` for when the
+    field is absent (else the table's default, else the field is required),
+    and checks the value like the function it names.
+
     Parameters
     ----------
     table : object
@@ -407,8 +292,7 @@ class TomlTable:
     where : str
         The table as the user wrote it, for messages (``"[alerts.email]"``).
     fields : iterable of str, or dict
-        The field names the table may hold; a dict also gives each field's
-        default, used when a getter is given none.
+        The field names the table may hold; a dict also gives their defaults.
     source : str
         The file's name, for messages.
     base_dir : str or Path, optional
@@ -429,12 +313,10 @@ class TomlTable:
         self.base_dir = None if base_dir is None else Path(base_dir)
         if not isinstance(table, dict):
             fail(where, "a table", table, source, error)
+        self.table = table
         unknown = sorted(set(table) - set(fields))
         if unknown:
-            raise error(
-                f"{source}: {where} has unknown field {unknown[0]!r}; allowed: {sorted(fields)}"
-            )
-        self.table = table
+            self.error(f"has unknown field {unknown[0]!r}; allowed: {sorted(fields)}")
         self.defaults = fields if isinstance(fields, dict) else {}
 
     def _at(self, key):
@@ -452,44 +334,34 @@ class TomlTable:
         """Whether the field is written in the file."""
         return key in self.table
 
-    def get(self, key, default=REQUIRED):
+    def get(self, key, default=_REQUIRED):
         """The field's value as written, else its default, else an error: it is required."""
         if key in self.table:
             return self.table[key]
-        if default is REQUIRED:
-            default = self.defaults.get(key, REQUIRED)
-        if default is REQUIRED:
+        if default is _REQUIRED:
+            default = self.defaults.get(key, _REQUIRED)
+        if default is _REQUIRED:
             self.error(f"is missing the required field {key!r}")
         return default
 
-    def _value(self, key, default, value):
-        return self.get(key, default) if value is _FIELD else value
-
     def number(
-        self, key, lo=None, hi=None, *, lo_open=False, hi_open=False, default=REQUIRED, value=_FIELD
+        self,
+        key,
+        lo=None,
+        hi=None,
+        *,
+        lo_open=False,
+        hi_open=False,
+        default=_REQUIRED,
+        value=_FIELD,
     ):
-        """A number (:func:`check_number`), as a float in the file's unit.
+        """:func:`check_number`, in the field's own unit (named in its key).
 
-        Parameters
-        ----------
-        key : str
-            Field name.
-        lo, hi : float or None
-            Allowed range, in the field's own unit (named in its key).
-        lo_open, hi_open : bool
-            Whether ``lo`` or ``hi`` itself is excluded.
-        default : float, optional
-            Value when the field is absent; else the table's, else required.
-        value : object, optional
-            A value to check in the field's name instead of the field's own
-            (one element of a list).
-
-        Returns
-        -------
-        float
+        ``value``, when given, is checked in the field's name instead of the
+        field (one element of a list).
         """
         return check_number(
-            value=self._value(key, default, value),
+            value=self.get(key, default) if value is _FIELD else value,
             lo=lo,
             hi=hi,
             lo_open=lo_open,
@@ -498,80 +370,42 @@ class TomlTable:
             **self._at(key),
         )
 
-    def numbers(self, key, sizes, what, lo=None, hi=None, *, lo_open=False, default=REQUIRED):
-        """A list of numbers, each checked like :meth:`number`, as a tuple.
-
-        Parameters
-        ----------
-        key : str
-            Field name.
-        sizes : container of int
-            The lengths allowed, e.g. ``(2,)`` or ``range(1, 9)``.
-        what : str
-            The list as a whole, for the message (``"[x, y] in mm"``).
-        lo, hi : float or None
-            Each number's range.
-        lo_open : bool
-            Whether ``lo`` itself is excluded.
-        default : list, optional
-            Value when the field is absent.
-
-        Returns
-        -------
-        tuple of float
-        """
+    def numbers(self, key, sizes, what, lo=None, hi=None, *, lo_open=False, default=_REQUIRED):
+        """A list of numbers as a tuple: its length one of ``sizes`` (the list is told
+        ``what``), each number checked like :meth:`number`."""
         values = self.get(key, default)
         if not isinstance(values, list) or len(values) not in sizes:
             self.fail(key, what, values)
         return tuple(self.number(key, lo, hi, lo_open=lo_open, value=v) for v in values)
 
-    def integer(self, key, lo=None, hi=None, *, default=REQUIRED, value=_FIELD):
-        """A whole number (:func:`check_int`) in ``[lo, hi]``; ``value`` as in :meth:`number`."""
+    def integer(self, key, lo=None, hi=None, *, default=_REQUIRED, value=_FIELD):
+        """:func:`check_int`; ``value`` as in :meth:`number`."""
         return check_int(
-            value=self._value(key, default, value),
+            value=self.get(key, default) if value is _FIELD else value,
             lo=lo,
             hi=hi,
             kind="a whole number" if self.terse else None,
             **self._at(key),
         )
 
-    def flag(self, key, *, default=REQUIRED):
-        """A boolean field."""
+    def flag(self, key, *, default=_REQUIRED):
+        """:func:`check_bool`."""
         return check_bool(value=self.get(key, default), kind="true or false", **self._at(key))
 
-    def text(self, key, *, default=REQUIRED, empty=False):
-        """A one-line string (:func:`check_text`); None when absent with a None default."""
+    def text(self, key, *, default=_REQUIRED, empty=False):
+        """:func:`check_text`; None when absent with a None default (TOML has no null)."""
         value = self.get(key, default)
-        if value is None:  # TOML itself has no null
-            return None
-        return check_text(value=value, empty=empty, **self._at(key))
+        return None if value is None else check_text(value=value, empty=empty, **self._at(key))
 
-    def choice(self, key, allowed, *, default=REQUIRED):
-        """One of ``allowed`` (:func:`check_option`)."""
+    def choice(self, key, allowed, *, default=_REQUIRED):
+        """:func:`check_option`."""
         return check_option(value=self.get(key, default), allowed=allowed, **self._at(key))
 
-    def choices(self, key, allowed, *, default=REQUIRED, empty=True):
-        """A list of distinct values, each one of ``allowed``, as a tuple.
-
-        Parameters
-        ----------
-        key : str
-            Field name.
-        allowed : tuple of str
-            The values the list may hold.
-        default : tuple, optional
-            Value when the field is absent.
-        empty : bool
-            Whether the empty list is allowed.
-
-        Returns
-        -------
-        tuple of str
-        """
+    def choices(self, key, allowed, *, default=_REQUIRED):
+        """A list of distinct values, each one of ``allowed``, as a tuple."""
         value = self.get(key, default)
         if (
             not isinstance(value, list | tuple)
-            or (not empty and not value)
             or any(v not in allowed for v in value)
             or len(set(value)) != len(value)
         ):
@@ -585,14 +419,9 @@ class TomlTable:
             self.fail(key, "an environment variable name ([A-Za-z_][A-Za-z0-9_]*)", value)
         return value
 
-    def path(self, key, *, default=REQUIRED):
-        """A file path: ``~`` expanded, relative paths resolved against ``base_dir``.
-
-        Returns
-        -------
-        Path or None
-            None only when the field is absent and ``default`` is None.
-        """
+    def path(self, key, *, default=_REQUIRED):
+        """A file path (Path, or None when absent with a None default): ``~`` expanded,
+        a relative path taken from ``base_dir``."""
         value = self.text(key, default=default)
         if value is None:
             return None

@@ -104,9 +104,8 @@ def _int(row, name, *, optional=True, minimum=None):
     value = getattr(row, name)
     if value is None and optional:
         return
+    where, bits = _where(row, name), "a 64-bit integer"
     # BIGINT, and nanoseconds up to the year 2262
-    where = _where(row, name)
-    bits = "a 64-bit integer"
     value = check_int(
         where, value, -(2**63), 2**63 - 1, kind="an integer", allowed=bits, error=HistoryError
     )
