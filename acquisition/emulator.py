@@ -60,10 +60,11 @@ from acquisition.protocol import (
     encode_marker,
 )
 from imu_square import __version__
-from imu_square.errors import AcquisitionError, check_option
+from imu_square.errors import AcquisitionError
 from imu_square.log import logger
 from imu_square.simulate import simulate_run
 from imu_square.units import UG
+from imu_square.validation import check_option
 
 DEFAULT_SCALE_M_S2 = 3.9 * UG  # one count of an ADXL355 at +-2 g
 HEADER_INTERVAL_S = 1.0

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.errors import AcquisitionError, check_option
+from imu_square.errors import AcquisitionError
+from imu_square.validation import check_option
 
 MODES = ("binary", "line")
 SEQ_MODULUS = 2**32

@@ -56,7 +56,7 @@ from acquisition.messages import (
     check_header,
     unwrap_seq,
 )
-from imu_square.errors import check_option
+from imu_square.validation import check_option
 
 __all__ = [
     "FLAG_FIFO_OVERRUN",

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from imu_square.errors import check_option
+from imu_square.validation import check_option
 
 TRIGGERS = ("immediate", "motion", "marker")
 

@@ -584,6 +584,21 @@ def test_rows_refuse_what_cannot_be_stored():
     assert invalid.invalid_reason == "bad file end"
 
 
+def test_rows_check_as_every_entry_point_does():
+    # each row's refusals are HistoryErrors (the choices were plain ImuSquareErrors)
+    with pytest.raises(HistoryError, match=r"^AnchorRow.method must be one of"):
+        AnchorRow(baseline_id=1, method="laser", value_rad=0.0)
+    with pytest.raises(HistoryError, match=r"^EvaluationRow.state must be one of"):
+        EvaluationRow(run_id=1, state="fine")
+    # a numpy float is no run id (1.5 was cut to run 1)
+    with pytest.raises(HistoryError, match=r"^BaselineRow.run_ids must be one or more run ids"):
+        _baseline([np.float64(1.5)])
+    assert _baseline([np.int64(2), 1]).run_ids == (1, 2)
+    # numpy's bool is stored as a bool, as numpy's numbers are stored as numbers
+    row = dataclasses.replace(run_for(1), valid=np.bool_(True))
+    assert type(row.valid) is bool
+
+
 def test_settings_hash_and_file_hash(tmp_path):
     a = settings_hash({"b": 1.0, "a": [1, 2], "c": np.float64(0.1)})
     b = settings_hash({"a": (1, 2), "c": 0.1, "b": 1.0})

@@ -466,6 +466,25 @@ def test_design_refuses_bad_parameters(kwargs, message):
         design_alarms(args.pop("arl0_nights"), args.pop("sigma_rad"), **args)
 
 
+# A bool is no number here either (imu_square.validation), as in every file: True
+# was taken as 1.0 (ewma_lambda, cusum_k) and as one degree of freedom (nu).
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"ewma_lambda": True}, r"^ewma_lambda must be a number within \(0, 1\], got True$"),
+        ({"cusum_k": True}, r"^cusum_k must be a number within \[0, inf\], got True$"),
+        ({"nu": True}, r"^nu must be None \(normal\) or a number >= 1, got True$"),
+    ],
+)
+def test_design_refuses_a_bool_for_a_number(kwargs, message):
+    test_design_refuses_bad_parameters(kwargs, message)
+
+
+def test_evaluation_refuses_a_bool_for_the_degrees_of_freedom(design):
+    with pytest.raises(MonitorError, match=r"^nu of night 0 must be None \(normal\) or a number"):
+        run_charts(design, [1e-6], [1e-6], [True])
+
+
 # --- ChartRun -----------------------------------------------------------------------------
 
 

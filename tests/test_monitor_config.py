@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 
+from imu_square.cli import main
 from imu_square.errors import MonitorConfigError
 from imu_square.monitor.config import read_monitor
 
@@ -67,3 +68,41 @@ def test_mistakes_are_one_line_naming_file_field_and_value(tmp_path, text, messa
 def test_missing_file(tmp_path):
     with pytest.raises(MonitorConfigError, match=r"nowhere\.toml"):
         read_monitor(tmp_path / "nowhere.toml")
+
+
+# The monitor file's checks are now those of every file (imu_square.validation);
+# each of these it said differently from the program, machine and sensor files.
+OWN = MINIMAL + 'history = "h.db"\n'  # a file read right is no reason to touch ~
+
+
+@pytest.mark.parametrize(
+    ("text", "line"),
+    [
+        # an infinity is told "finite", as by the program file (was "in (0, 600]")
+        (
+            OWN + "[sensor]\nheader_timeout_s = inf\n",
+            "[sensor] header_timeout_s must be finite, got inf",
+        ),
+        # the number as it is read, as every file gives it (was "got 0")
+        (
+            OWN + "[alarms]\nstep_um_per_m = 0\n",
+            "[alarms] step_um_per_m must be in (0, 10000], got 0.0",
+        ),
+        # blank text is no text (was taken as the port "  ")
+        (
+            OWN + '[sensor]\nport = "  "\n',
+            "[sensor] port must be a non-empty string on one line (no control characters), "
+            "got '  '",
+        ),
+        # the sections sorted, as every file lists its sections and fields
+        (
+            OWN + "[sensr]\n",
+            "unknown section [sensr]; allowed: ['alarms', 'alerts', 'analysis', 'emulated', "
+            "'metrics', 'monitor', 'program', 'sensor']",
+        ),
+    ],
+)
+def test_the_monitor_file_is_checked_like_every_file(tmp_path, capsys, text, line):
+    path = _write(tmp_path, text)
+    assert main(["history", "--config", str(path)]) == 2
+    assert capsys.readouterr().err == f"imu-square history: error: {path}: {line}\n"

@@ -19,6 +19,7 @@ from imu_square.program.planner import (
     Goal,
     Limits,
     PlanError,
+    PlanInputError,
     SensorSpec,
     plan_test,
     predict,
@@ -303,3 +304,29 @@ def test_a_refused_sensor_file_value_is_named_as_the_file_s(tmp_path, capsys):
     assert main([*argv, "--range-g", "-1"]) == 2
     err = capsys.readouterr().err
     assert ": --range-g must be in (0, 1019.72] g, got -1 g" in err, err
+
+
+# Every input is checked by imu_square.validation, as every file's fields are.
+@pytest.mark.parametrize(
+    ("sensor", "limits", "match"),
+    [
+        # text was a TypeError from a comparison
+        (SENSOR25, replace(LIMITS, time_s="300"), r"^time \[s\] must be a number in \(0, 1e\+06\]"),
+        # a bool is not a number (True was taken as a 1 Hz corner)
+        (
+            replace(SENSOR25, flicker_corner_hz=True),
+            LIMITS,
+            r"^flicker corner \[Hz\] must be a number in \[0, 1000\], got True$",
+        ),
+    ],
+)
+def test_a_plan_input_of_the_wrong_type_is_refused_naming_it(sensor, limits, match):
+    with pytest.raises(PlanInputError, match=match) as info:
+        plan_test(sensor, limits, Goal())
+    assert info.value.parameter in ("time_s", "flicker_corner_hz")
+
+
+def test_a_numpy_integer_is_a_whole_number_to_the_planner():
+    # a numpy integer was refused as "baseline runs must be a whole number"
+    goal = Goal(baseline_runs=np.int64(5))
+    assert plan_test(SENSOR25, LIMITS, goal) == plan_test(SENSOR25, LIMITS, Goal(baseline_runs=5))

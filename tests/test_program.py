@@ -225,3 +225,20 @@ def test_cli_bad_program_is_one_line(tmp_path, capsys):
         f"imu-square program: error: {path}: [program] cycles_per_direction must be a whole "
         "number in [2, 1000], got 1"
     ]
+
+
+# A whole number is an integer in every file and function (imu_square.validation):
+# the program file alone took 15.0 for 15, where the monitor file refused 2.0.
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("cycles_per_direction = 15.0", "cycles_per_direction must be a whole number, got 15.0"),
+        ("cycles_per_direction = 15\nruns = 2.0", "runs must be a whole number, got 2.0"),
+    ],
+)
+def test_a_whole_number_is_written_as_one(tmp_path, capsys, line, message):
+    path = tmp_path / "p.toml"
+    path.write_text(f"[program]\nradius_mm = 100\nfeed_mm_per_min = 6000\n{line}\n")
+    assert main(["program", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"imu-square program: error: {path}: [program] {message}\n"

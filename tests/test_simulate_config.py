@@ -5,6 +5,7 @@ import math
 import pytest
 from numpy.testing import assert_allclose
 
+from imu_square.cli import main
 from imu_square.errors import ConfigError
 from imu_square.program import TestProgram, read_program
 from imu_square.simulate import (
@@ -198,3 +199,38 @@ def test_events_at_true_motion_start_and_end():
     assert (rec.accel[before, :2] == 0).all() and (rec.accel[~before, :2][:1] != 0).any()
     rec2, _ = simulate_run(PROGRAM, seed=0, lead_in_s=0.5, events=False)
     assert rec2.events == []
+
+
+# The machine and sensor files are now checked like every file (imu_square.validation);
+# each of these they said differently, or let through.
+@pytest.mark.parametrize(
+    ("flag", "text", "line"),
+    [
+        # a name is one line of text, as in the monitor file (was taken as it came)
+        (
+            "--machine",
+            '[machine]\nname = "a\\nb"\n',
+            "[machine] name must be a non-empty string on one line (no control characters), "
+            "got 'a\\nb'",
+        ),
+        # an infinity is told "finite", as by the program file (was "in [-100000, 100000]")
+        ("--sensor", "[sensor]\nbeta_urad = inf\n", "[sensor] beta_urad must be finite, got inf"),
+        # each number of a list is checked as a number, as in the program file's centre_mm
+        (
+            "--sensor",
+            "[sensor_gain_mismatch]\ngain_percent = [60, 0, 0]\n",
+            "[sensor_gain_mismatch] gain_percent must be in [-50, 50], got 60.0",
+        ),
+        (
+            "--machine",
+            '[geometry]\naxis_centre_mm = [0, "x"]\n',
+            "[geometry] axis_centre_mm must be a number, got 'x'",
+        ),
+    ],
+)
+def test_machine_and_sensor_files_are_checked_like_every_file(tmp_path, capsys, flag, text, line):
+    path = tmp_path / "f.toml"
+    path.write_text(text)
+    assert main(["simulate", flag, str(path), "-o", str(tmp_path / "r.mcap")]) == 2
+    assert capsys.readouterr().err == f"imu-square simulate: error: {path}: {line}\n"
+    assert not (tmp_path / "r.mcap").exists()

@@ -177,8 +177,9 @@ def run(args):
 def _in_flag_units(exc, args):
     """The planner's refusal of a value, restated with the option and the unit it came in,
     or as the --sensor file's value when it came from there."""
-    from imu_square.program.planner import PlanError, interval
+    from imu_square.program.planner import PlanError
     from imu_square.units import MM, MM_PER_MIN, MS, UG, URAD, G
+    from imu_square.validation import interval
 
     flag, unit, scale = {
         "noise_density_m_s2_rthz": ("--noise-density-ug", "ug/sqrt(Hz)", UG),
@@ -198,6 +199,7 @@ def _in_flag_units(exc, args):
         "baseline_runs": ("--baseline-runs", "", 1.0),
     }[exc.parameter]
     lo, hi = (b / scale for b in exc.bounds)
+    lo_in, hi_in = exc.closed
     got = exc.value / scale
     # a sensor field the flag did not give came from the --sensor file
     dest = {"noise_density_m_s2_rthz": "noise_density_ug", "eps_c_rad": "eps_c_deg"}.get(
@@ -209,5 +211,6 @@ def _in_flag_units(exc, args):
     where = " (here the --sensor file's value)" if from_file else ""
     unit = f" {unit}" if unit else ""
     return PlanError(
-        f"{flag}{where} must be in {interval((lo, hi), exc.closed)}{unit}, got {got:.6g}{unit}"
+        f"{flag}{where} must be in {interval(lo, hi, not lo_in, not hi_in)}{unit}, "
+        f"got {got:.6g}{unit}"
     )

@@ -44,23 +44,14 @@ def register(sub):
 
 def _settings(path):
     """The [analysis] table of a settings file."""
-    import tomllib
-
     from imu_square.errors import MonitorConfigError
     from imu_square.monitor.config import AnalysisSettings
-    from imu_square.monitor.fields import Table
-    from imu_square.textfile import read_text
+    from imu_square.textfile import read_toml
+    from imu_square.validation import read_tables
 
-    text = read_text(path, MonitorConfigError)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise MonitorConfigError(f"{path}: not valid TOML: {exc}") from None
-    extra = sorted(set(doc) - {"analysis"})
-    if extra:
-        raise MonitorConfigError(f"{path}: unknown section [{extra[0]}]; allowed: ['analysis']")
-    t = Table(doc.get("analysis", {}), "[analysis]", ("cutoff_hz", "order", "bootstrap"), path)
-    return AnalysisSettings.from_table(t)
+    layout = {"analysis": ("cutoff_hz", "order", "bootstrap")}
+    t = read_tables(read_toml(path, MonitorConfigError), layout, path, MonitorConfigError)
+    return AnalysisSettings.from_table(t["analysis"])
 
 
 class _Progress:

@@ -28,9 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from imu_square.errors import RecordingError, check_option
+from imu_square.errors import RecordingError
 from imu_square.io.recording import AXES, Event, Recording, SensorInfo
 from imu_square.units import G
+from imu_square.validation import check_option
 
 FORMATS = {
     # name: (expected columns, unit name, factor to m/s^2, comment-prefixed header)

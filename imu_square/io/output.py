@@ -158,7 +158,7 @@ def check_plot_path(path):
     """
     from matplotlib.backend_bases import FigureCanvasBase
 
-    from imu_square.errors import check_option
+    from imu_square.validation import check_option
 
     path = check_output_path(path, overwrite=True)
     formats = sorted(FigureCanvasBase.get_supported_filetypes())

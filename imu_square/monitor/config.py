@@ -41,16 +41,15 @@ file, as ``imu-square init`` writes it::
 The history's per-user default is :func:`imu_square.monitor.history.store.default_history_path`.
 """
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from imu_square.errors import MonitorConfigError
 from imu_square.monitor.alerts.config import AlertsConfig, alerts_from_mapping
-from imu_square.monitor.fields import Table
 from imu_square.monitor.report.metrics import MetricsConfig, metrics_from_mapping
-from imu_square.textfile import read_text
+from imu_square.textfile import read_toml
 from imu_square.units import URAD
+from imu_square.validation import TomlTable, check_sections
 
 EMULATED = "emulated"
 TRIGGERS = ("marker", "motion", "immediate")
@@ -160,16 +159,16 @@ class AnalysisSettings:
 
         Parameters
         ----------
-        table : imu_square.monitor.fields.Table
+        table : imu_square.validation.TomlTable
             The ``[analysis]`` table of a monitor or settings file.
 
         Returns
         -------
         AnalysisSettings
         """
-        cutoff_hz = table.number("cutoff_hz", 4.0, 0.0, 1000.0, lo_open=True)
-        order = table.integer("order", 1, 1, 8)
-        bootstrap = table.integer("bootstrap", 200, 0, 10_000)
+        cutoff_hz = table.number("cutoff_hz", 0.0, 1000.0, lo_open=True, default=4.0)
+        order = table.integer("order", 1, 8, default=1)
+        bootstrap = table.integer("bootstrap", 0, 10_000, default=200)
         if bootstrap == 1:  # one resample has no spread
             table.fail("bootstrap", "0 (no bootstrap) or a whole number in [2, 10000]", 1)
         return cls(cutoff_hz=cutoff_hz, order=order, bootstrap=bootstrap)
@@ -292,16 +291,12 @@ def monitor_from_mapping(doc, path):
     """
     path = Path(path)
     source, base = str(path), path.parent
-    unknown = sorted(set(doc) - set(SECTIONS))
-    if unknown:
-        raise MonitorConfigError(
-            f"{source}: unknown section [{unknown[0]}]; allowed: {list(SECTIONS)}"
-        )
+    check_sections(doc, SECTIONS, source, MonitorConfigError)
     if "monitor" not in doc:
         raise MonitorConfigError(f"{source}: the [monitor] section with machine_id is missing")
 
     def table(name, fields):
-        return Table(doc.get(name, {}), f"[{name}]", fields, source, base)
+        return TomlTable(doc.get(name, {}), f"[{name}]", fields, source, base, MonitorConfigError)
 
     mon = table("monitor", ("machine_id", "history", "data_dir"))
     machine_id = mon.text("machine_id")
@@ -315,35 +310,37 @@ def monitor_from_mapping(doc, path):
             "1-64 letters, digits, '_', '.' or '-', starting with a letter or digit",
             machine_id,
         )
-    history = mon.text("history", "", empty=True)
+    history = mon.text("history", default="", empty=True)
     if "://" in history and not history.startswith(("postgresql://", "postgres://")):
         mon.fail("history", "a file path or a postgresql:// URL", history)
     if history and not history.startswith(("postgresql://", "postgres://")):
         history = str(mon.path("history"))
-    data_dir = mon.path("data_dir") if mon.text("data_dir", "", empty=True) else None
+    data_dir = mon.path("data_dir") if mon.text("data_dir", default="", empty=True) else None
 
     sen = table("sensor", ("port", "baud", "trigger", "header_timeout_s"))
     sensor = SensorLink(
-        port=sen.text("port", EMULATED),
-        baud=sen.integer("baud", 921600, 1, 20_000_000),
-        trigger=sen.choice("trigger", "marker", TRIGGERS),
-        header_timeout_s=sen.number("header_timeout_s", 5.0, 0.0, 600.0, lo_open=True),
+        port=sen.text("port", default=EMULATED),
+        baud=sen.integer("baud", 1, 20_000_000, default=921600),
+        trigger=sen.choice("trigger", TRIGGERS, default="marker"),
+        header_timeout_s=sen.number("header_timeout_s", 0.0, 600.0, lo_open=True, default=5.0),
     )
     emu = table("emulated", ("machine", "sensor", "speed", "uptime_s"))
     emulated = EmulatedBoard(
-        machine=emu.path("machine") if emu.text("machine", "", empty=True) else None,
-        sensor=emu.path("sensor") if emu.text("sensor", "", empty=True) else None,
-        speed=emu.number("speed", 20.0, 0.0, 1000.0, lo_open=True),
-        uptime_s=emu.number("uptime_s", 18000.0, 0.0, 1e9),
+        machine=emu.path("machine") if emu.text("machine", default="", empty=True) else None,
+        sensor=emu.path("sensor") if emu.text("sensor", default="", empty=True) else None,
+        speed=emu.number("speed", 0.0, 1000.0, lo_open=True, default=20.0),
+        uptime_s=emu.number("uptime_s", 0.0, 1e9, default=18000.0),
     )
     prog = table("program", ("file",))
-    program = prog.path("file") if prog.text("file", "", empty=True) else None
+    program = prog.path("file") if prog.text("file", default="", empty=True) else None
     analysis = AnalysisSettings.from_table(table("analysis", ("cutoff_hz", "order", "bootstrap")))
     alarm = table("alarms", ("false_alarm_nights", "step_um_per_m", "monte_carlo_nights"))
     alarms = AlarmSettings(
-        false_alarm_nights=alarm.number("false_alarm_nights", 730.0, 10.0, 1e6),
-        step_rad=alarm.number("step_um_per_m", 10.0, 0.0, 1e4, lo_open=True) * URAD,
-        monte_carlo_nights=alarm.integer("monte_carlo_nights", 4_000_000, 100_000, 100_000_000),
+        false_alarm_nights=alarm.number("false_alarm_nights", 10.0, 1e6, default=730.0),
+        step_rad=alarm.number("step_um_per_m", 0.0, 1e4, lo_open=True, default=10.0) * URAD,
+        monte_carlo_nights=alarm.integer(
+            "monte_carlo_nights", 100_000, 100_000_000, default=4_000_000
+        ),
     )
     metrics = None
     if "metrics" in doc:
@@ -375,9 +372,4 @@ def read_monitor(path):
     -------
     MonitorConfig
     """
-    text = read_text(path, MonitorConfigError)
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise MonitorConfigError(f"{path}: not valid TOML: {exc}") from None
-    return monitor_from_mapping(doc, path)
+    return monitor_from_mapping(read_toml(path, MonitorConfigError), path)

@@ -41,8 +41,9 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 from statsmodels.robust import norms
 
-from imu_square.errors import AnalysisError, ImuSquareWarning, check_option
+from imu_square.errors import AnalysisError, ImuSquareWarning
 from imu_square.pipeline.order_stats import row_medians
+from imu_square.validation import check_option
 
 NORMS = {
     "tukey": norms.TukeyBiweight,

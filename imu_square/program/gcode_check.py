@@ -11,8 +11,9 @@ import math
 import re
 from dataclasses import dataclass, field
 
-from imu_square.errors import ProgramError, check_option
+from imu_square.errors import ProgramError
 from imu_square.program.ncgen import DIALECTS
+from imu_square.validation import check_option
 
 # Largest gap between the start and end radius of an arc, as the controls
 # allow (LinuxCNC: 0.0005 in); our coordinates are rounded to 1 um. [mm]

@@ -61,7 +61,8 @@ References
 
 import math
 
-from imu_square.errors import ProgramError, check_option
+from imu_square.errors import ProgramError
+from imu_square.validation import check_option
 
 DIALECTS = ("linuxcnc", "fanuc", "sinumerik")
 

@@ -46,6 +46,7 @@ the sensor's range and the time given, with as many whole cycles as fit.
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 from scipy import stats
 
@@ -61,6 +62,7 @@ from imu_square.program.spec import (
     program_from_mapping,
 )
 from imu_square.units import MM, MM_PER_MIN, SQUARENESS_UNIT, UG, URAD, G
+from imu_square.validation import check_int, check_number
 
 # The efficiency of the pipeline's estimator of theta_y - theta_x, the bound's
 # variance over the estimate's: measured by ``benchmarks/planner.py
@@ -112,7 +114,7 @@ class PlanInputError(PlanError):
     ----------
     parameter : str
         The field it came from, e.g. ``"max_feed_m_s"`` (``Limits.max_feed_m_s``).
-    value : float
+    value : object
         What was given, in the field's SI unit.
     bounds : tuple of float
         ``(lo, hi)``, in the same unit.
@@ -120,27 +122,9 @@ class PlanInputError(PlanError):
         Whether ``lo`` and ``hi`` are allowed.
     """
 
-    def __init__(self, parameter, label, value, bounds, closed):
+    def __init__(self, parameter, value, bounds, closed, message):
         self.parameter, self.value, self.bounds, self.closed = parameter, value, bounds, closed
-        super().__init__(f"{label} must be in {interval(bounds, closed)}, got {value!r}")
-
-
-def interval(bounds, closed):
-    """``(lo, hi]`` and the like, for messages.
-
-    Parameters
-    ----------
-    bounds : tuple of float
-        ``(lo, hi)``, in any one unit.
-    closed : tuple of bool
-        Whether each end is allowed.
-
-    Returns
-    -------
-    str
-    """
-    (lo, hi), (lo_in, hi_in) = bounds, closed
-    return f"{'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}"
+        super().__init__(message)
 
 
 @dataclass(frozen=True)
@@ -654,13 +638,9 @@ def _fastest(program, name="centripetal_m_s2"):
 
 
 def _check(parameter, label, value, lo, hi, lo_open=True, hi_open=False):
-    ok = (
-        (lo < value if lo_open else lo <= value)
-        and (value < hi if hi_open else value <= hi)
-        and math.isfinite(value)
-    )
-    if not ok:
-        raise PlanInputError(parameter, label, value, (lo, hi), (not lo_open, not hi_open))
+    # The error carries the bounds, for a caller that restates them in its own units.
+    error = partial(PlanInputError, parameter, value, (lo, hi), (not lo_open, not hi_open))
+    check_number(label, value, lo, hi, lo_open=lo_open, hi_open=hi_open, error=error)
 
 
 def check_inputs(sensor, limits, goal):
@@ -714,9 +694,8 @@ def check_inputs(sensor, limits, goal):
     _check("confidence", "confidence", goal.confidence, 0.0, 1.0, hi_open=True)
     if goal.change_rad is not None:
         _check("change_rad", "change to detect [rad]", goal.change_rad, 0.0, 1.0)
-    if isinstance(goal.baseline_runs, bool) or not isinstance(goal.baseline_runs, int):
-        raise PlanError(f"baseline runs must be a whole number, got {goal.baseline_runs!r}")
-    _check("baseline_runs", "baseline runs", goal.baseline_runs, 0, 10**6)
+    check_int("baseline runs", goal.baseline_runs, error=PlanError)
+    _check("baseline_runs", "baseline runs", goal.baseline_runs, 0, 1e6)
 
 
 def plan_test(sensor, limits, goal, efficiency=ESTIMATOR_EFFICIENCY):

@@ -34,11 +34,11 @@ where the previous block ended; only the middle whole cycles are analysed.
 
 import itertools
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field, replace
 
-from imu_square.errors import ProgramError, check_option
-from imu_square.textfile import read_text
+from imu_square.errors import ProgramError
+from imu_square.textfile import parse_toml, read_text
+from imu_square.validation import TomlTable, interval
 
 DIRECTIONS = ("ccw", "cw")
 SUPPORTED_PLANES = ("XY",)
@@ -401,84 +401,50 @@ def _toml_value(value):
     return str(value)
 
 
-_FIELDS = {
-    "plane": str,
-    "radius_mm": float,
-    "feed_mm_per_min": float,
-    "feeds_mm_per_min": list,
-    "cycles_per_direction": int,
-    "overshoot_deg": float,
-    "start_angle_deg": float,
-    "order": list,
-    "dwell_s": float,
-    "runs": int,
-    "centre_mm": list,
-}
+_FIELDS = (
+    "plane",
+    "radius_mm",
+    "feed_mm_per_min",
+    "feeds_mm_per_min",
+    "cycles_per_direction",
+    "overshoot_deg",
+    "start_angle_deg",
+    "order",
+    "dwell_s",
+    "runs",
+    "centre_mm",
+)
 _REQUIRED = ("radius_mm", "cycles_per_direction")
 
 
-def _number(source, key, value, kind):
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ProgramError(f"{source}: [program] {key} must be a number, got {value!r}")
-    if kind is int:
-        if isinstance(value, float) and not value.is_integer():
-            raise ProgramError(f"{source}: [program] {key} must be a whole number, got {value!r}")
-        return int(value)
-    value = float(value)
-    if not math.isfinite(value):
-        raise ProgramError(f"{source}: [program] {key} must be finite, got {value!r}")
-    return value
-
-
-def _feed(source, key, value):
-    feed = _number(source, key, value, float)
-    if not 0 < feed <= MAX_FEED_M_PER_S * 6e4:
-        raise ProgramError(
-            f"{source}: [program] {key} must be in (0, {MAX_FEED_M_PER_S * 6e4:g}], got {feed!r}"
-        )
-    return feed
-
-
-def _feeds(source, table):
+def _feeds(t):
     """The feeds in mm/min: ``[feed_mm_per_min]`` or the checked ``feeds_mm_per_min``."""
-    if "feed_mm_per_min" in table:
-        return [_feed(source, "feed_mm_per_min", table["feed_mm_per_min"])]
-    feeds = table["feeds_mm_per_min"]
-    if not isinstance(feeds, list) or not 1 <= len(feeds) <= MAX_FEEDS:
-        raise ProgramError(
-            f"{source}: [program] feeds_mm_per_min must be a list of 1 to {MAX_FEEDS} feeds "
-            f"in mm/min, got {feeds!r}"
-        )
-    feeds = [_feed(source, "feeds_mm_per_min", f) for f in feeds]
-    ordered = sorted(feeds)
-    for slow, fast in itertools.pairwise(ordered):
+    top = MAX_FEED_M_PER_S * 6e4
+    if t.has("feed_mm_per_min"):
+        return [t.number("feed_mm_per_min", 0.0, top, lo_open=True)]
+    what = f"a list of 1 to {MAX_FEEDS} feeds in mm/min"
+    feeds = list(
+        t.numbers("feeds_mm_per_min", range(1, MAX_FEEDS + 1), what, 0.0, top, lo_open=True)
+    )
+    for slow, fast in itertools.pairwise(sorted(feeds)):
         if fast < MIN_FEED_RATIO * slow:
-            raise ProgramError(
-                f"{source}: [program] feeds_mm_per_min must differ from each other by at least "
+            t.error(
+                f"feeds_mm_per_min must differ from each other by at least "
                 f"{MIN_FEED_RATIO - 1:.0%} (v^2/r by {MIN_FEED_RATIO**2 - 1:.0%}) to separate "
                 f"what scales with the feed from what does not, got {feeds!r}"
             )
     return feeds
 
 
-def _cycles(source, value, n_feeds):
+def _cycles(t, n_feeds):
     """Cycles per direction at each feed, from one count or a list of one per feed."""
-    if isinstance(value, list):
-        if len(value) != n_feeds:
-            raise ProgramError(
-                f"{source}: [program] cycles_per_direction must be one whole number, or a list "
-                f"of one per feed ({n_feeds}), got {value!r}"
-            )
-        counts = [_number(source, "cycles_per_direction", c, int) for c in value]
-    else:
-        counts = [_number(source, "cycles_per_direction", value, int)] * n_feeds
-    for cycles in counts:
-        if not 2 <= cycles <= 1000:
-            raise ProgramError(
-                f"{source}: [program] cycles_per_direction must be a whole number in [2, 1000], "
-                f"got {cycles!r}"
-            )
-    return counts
+    value = t.get("cycles_per_direction")
+    if not isinstance(value, list):
+        value = [value] * n_feeds
+    elif len(value) != n_feeds:
+        what = f"one whole number, or a list of one per feed ({n_feeds})"
+        t.fail("cycles_per_direction", what, value)
+    return [t.integer("cycles_per_direction", 2, 1000, value=c) for c in value]
 
 
 def program_from_mapping(table, source="<program>"):
@@ -500,78 +466,51 @@ def program_from_mapping(table, source="<program>"):
     ProgramError
         Naming the field, the value received and what is allowed.
     """
-    if not isinstance(table, dict):
-        raise ProgramError(f"{source}: [program] must be a table, got {table!r}")
-    unknown = sorted(set(table) - set(_FIELDS))
-    if unknown:
-        raise ProgramError(
-            f"{source}: [program] has unknown field {unknown[0]!r}; allowed: {sorted(_FIELDS)}"
-        )
+    t = TomlTable(table, "[program]", _FIELDS, source, error=ProgramError, terse=True)
     for key in _REQUIRED:
-        if key not in table:
-            raise ProgramError(f"{source}: [program] is missing the required field {key!r}")
-    if ("feed_mm_per_min" in table) == ("feeds_mm_per_min" in table):
-        raise ProgramError(
-            f"{source}: [program] needs exactly one of 'feed_mm_per_min' (one feed) and "
-            f"'feeds_mm_per_min' (a list of feeds), got "
-            f"{'both' if 'feed_mm_per_min' in table else 'neither'}"
+        t.get(key)
+    if t.has("feed_mm_per_min") == t.has("feeds_mm_per_min"):
+        t.error(
+            "needs exactly one of 'feed_mm_per_min' (one feed) and 'feeds_mm_per_min' (a list "
+            f"of feeds), got {'both' if t.has('feed_mm_per_min') else 'neither'}"
         )
     d = TestProgram()
-    get = table.get
-
-    plane = check_option(
-        "[program] plane", get("plane", d.plane), SUPPORTED_PLANES, source, ProgramError
-    )
-    radius_mm = _number(source, "radius_mm", get("radius_mm"), float)
-    if not 0 < radius_mm <= MAX_RADIUS_M * 1e3:
-        raise ProgramError(
-            f"{source}: [program] radius_mm must be in (0, {MAX_RADIUS_M * 1e3:g}], "
-            f"got {radius_mm!r}"
-        )
-    feeds = _feeds(source, table)
-    cycles = _cycles(source, get("cycles_per_direction"), len(feeds))
-    overshoot = _number(source, "overshoot_deg", get("overshoot_deg", 180.0), float)
-    if not 0 <= overshoot <= 360:
-        raise ProgramError(
-            f"{source}: [program] overshoot_deg must be in [0, 360], got {overshoot!r}"
-        )
-    start = _number(source, "start_angle_deg", get("start_angle_deg", 0.0), float)
-    order = get("order", list(d.order))
+    plane = t.choice("plane", SUPPORTED_PLANES, default=d.plane)
+    radius_mm = t.number("radius_mm", 0.0, MAX_RADIUS_M * 1e3, lo_open=True)
+    feeds = _feeds(t)
+    cycles = _cycles(t, len(feeds))
+    overshoot = t.number("overshoot_deg", 0.0, 360.0, default=180.0)
+    start = t.number("start_angle_deg", default=0.0)
+    order = t.get("order", list(d.order))
     if (
         not isinstance(order, list)
         or not order
         or any(o not in DIRECTIONS for o in order)
         or set(order) != set(DIRECTIONS)
     ):
-        raise ProgramError(
-            f"{source}: [program] order must list 'ccw' and 'cw' (each at least once), "
-            f"got {order!r}"
-        )
-    dwell = _number(source, "dwell_s", get("dwell_s", d.dwell_s), float)
-    if not 0 <= dwell <= 600:
-        raise ProgramError(f"{source}: [program] dwell_s must be in [0, 600], got {dwell!r}")
+        t.error(f"order must list 'ccw' and 'cw' (each at least once), got {order!r}")
+    dwell = t.number("dwell_s", 0.0, 600.0, default=d.dwell_s)
     if len(feeds) > 1 and dwell < MIN_FEEDS_DWELL_S:
-        raise ProgramError(
-            f"{source}: [program] dwell_s must be at least {MIN_FEEDS_DWELL_S:g} s with several "
-            f"feeds (the table rests between the feeds so that they are told apart), got {dwell!r}"
+        t.fail(
+            "dwell_s",
+            f"at least {MIN_FEEDS_DWELL_S:g} s with several feeds (the table rests between the "
+            "feeds so that they are told apart)",
+            dwell,
         )
-    runs = _number(source, "runs", get("runs", d.runs), int)
-    if not 1 <= runs <= 1000:
-        raise ProgramError(f"{source}: [program] runs must be in [1, 1000], got {runs!r}")
-    centre = get("centre_mm", [0.0, 0.0])
-    if not isinstance(centre, list) or len(centre) != 2:
-        raise ProgramError(f"{source}: [program] centre_mm must be [x, y] in mm, got {centre!r}")
-    centre = [_number(source, "centre_mm", c, float) for c in centre]
+    runs = t.integer("runs", default=d.runs)
+    if not 1 <= runs <= 1000:  # the program file's own wording, older than check_int's
+        t.fail("runs", f"in {interval(1, 1000)}", runs)
+    centre = t.numbers("centre_mm", (2,), "[x, y] in mm", default=[0.0, 0.0])
 
     radius_m = radius_mm * 1e-3
-    key = "feed_mm_per_min" if "feed_mm_per_min" in table else "feeds_mm_per_min"
+    key = "feed_mm_per_min" if t.has("feed_mm_per_min") else "feeds_mm_per_min"
     for feed in feeds:
         centripetal = (feed / 6e4) ** 2 / radius_m
         if not MIN_CENTRIPETAL_M_S2 <= centripetal <= MAX_CENTRIPETAL_M_S2:
-            raise ProgramError(
-                f"{source}: [program] {key}={feed:g} with radius_mm={radius_mm:g} gives a "
-                f"centripetal acceleration of {centripetal:.3g} m/s^2; a machine-tool circle "
-                f"test needs {MIN_CENTRIPETAL_M_S2:g} to {MAX_CENTRIPETAL_M_S2:g} m/s^2"
+            t.error(
+                f"{key}={feed:g} with radius_mm={radius_mm:g} gives a centripetal acceleration "
+                f"of {centripetal:.3g} m/s^2; a machine-tool circle test needs "
+                f"{MIN_CENTRIPETAL_M_S2:g} to {MAX_CENTRIPETAL_M_S2:g} m/s^2"
             )
     return TestProgram(
         plane=plane,
@@ -603,10 +542,7 @@ def parse_program(text, source="<program>"):
     -------
     TestProgram
     """
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ProgramError(f"{source}: not valid TOML: {exc}") from None
+    doc = parse_toml(text, source, ProgramError)
     if "program" not in doc:
         raise ProgramError(f"{source}: no [program] table; see the README for the layout")
     return program_from_mapping(doc["program"], source)

@@ -62,9 +62,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.errors import ImuSquareError, check_option
+from imu_square.errors import ImuSquareError
 from imu_square.reference.reference_line import REFERENCE_LINES
 from imu_square.reference.reference_line import reference_line as reference_line_fit
+from imu_square.validation import check_option
 
 SHAPES = ("L", "T", "+")
 ORIENTATIONS_DEG = (0, 90, 180, 270)

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from imu_square.errors import AnalysisError, ImuSquareError, check_option
+from imu_square.errors import AnalysisError, ImuSquareError
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.program import read_program
 from imu_square.program.spec import program_from_mapping
@@ -52,6 +52,7 @@ from imu_square.reference.diagonal import diagonal_squareness
 from imu_square.reference.reference_line import REFERENCE_LINES
 from imu_square.simulate import data_path, read_sensor, simulate_run
 from imu_square.units import MM, URAD
+from imu_square.validation import check_option
 
 # The IMU's default test: the paper's program (15 cycles each way, 180 deg
 # overshoot, 2 s dwell) on the ballbar's circle at 2 m/s^2, which resolves

@@ -36,7 +36,8 @@ from itertools import product
 
 import numpy as np
 
-from imu_square.errors import ImuSquareError, check_option
+from imu_square.errors import ImuSquareError
+from imu_square.validation import check_option
 
 _AXES = "XYZ"
 

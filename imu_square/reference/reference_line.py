@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linprog
 
-from imu_square.errors import ImuSquareError, check_option
+from imu_square.errors import ImuSquareError
+from imu_square.validation import check_option
 
 REFERENCE_LINES = ("least_squares", "end_point", "minimum_zone")
 

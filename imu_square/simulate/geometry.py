@@ -57,7 +57,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imu_square.errors import ConfigError, check_option
+from imu_square.errors import ConfigError
+from imu_square.validation import check_option
 
 
 @dataclass(frozen=True)

@@ -58,11 +58,12 @@ import warnings
 from dataclasses import dataclass, field
 
 from imu_square.errors import ConfigError, ImuSquareWarning
-from imu_square.simulate.config import Sections, load_toml
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.kinematics import SERVO_MODELS
 from imu_square.simulate.trajectory import RAMP_PROFILES
+from imu_square.textfile import read_toml
 from imu_square.units import HOUR, MS, UM
+from imu_square.validation import read_tables
 
 
 @dataclass(frozen=True)
@@ -220,12 +221,11 @@ _LAYOUT = {
 }
 
 
-def _squareness_key(sections, source):
+def _squareness_key(geometry, source):
     """The [geometry] field that holds alpha: the new name, or the old one with a warning."""
-    written = sections.doc.get("geometry", {})
-    if _LEGACY_SQUARENESS_KEY not in written:
+    if not geometry.has(_LEGACY_SQUARENESS_KEY):
         return "machine_squareness_um_per_m"
-    if "machine_squareness_um_per_m" in written:
+    if geometry.has("machine_squareness_um_per_m"):
         raise ConfigError(
             f"{source}: [geometry] has both machine_squareness_um_per_m and its old name "
             f"{_LEGACY_SQUARENESS_KEY}: keep machine_squareness_um_per_m only"
@@ -258,57 +258,51 @@ def machine_from_mapping(doc, source="<machine>"):
     ConfigError
         Naming the file, section and field, what is allowed and what was received.
     """
-    s = Sections(doc, source, _LAYOUT)
-    big = 1e6  # urad/m: a tilt rate above 1 rad/m is a unit mistake
-    lengths = s.pair("geometry", "axis_length_mm", 1e-3)
+    t = read_tables(doc, _LAYOUT, source, ConfigError, terse=True)
+    machine, geo, yaw = t["machine"], t["geometry"], t["straightness_yaw"]
+    servo, backlash, spikes = t["servo_mismatch"], t["backlash"], t["reversal_spikes"]
+    vibration = t["structural_vibration"]
+    pair = "two finite numbers [a, b]"
+    lengths = geo.numbers("axis_length_mm", (2,), pair)
     if min(lengths) <= 0:
-        raw = s.raw("geometry", "axis_length_mm")
-        raise ConfigError(f"{source}: [geometry] axis_length_mm must be positive, got {raw!r}")
+        geo.fail("axis_length_mm", "positive", geo.get("axis_length_mm"))
     geometry = Geometry(
-        machine_squareness_rad=s.number("geometry", _squareness_key(s, source), UM, -1e4, 1e4),
-        machine_squareness_rate_rad_s=s.number(
-            "squareness_drift", "rate_um_per_m_per_h", UM / HOUR, -1e4, 1e4
-        ),
-        scale_x=s.number("scale_mismatch", "x_um_per_m", UM, -1e4, 1e4),
-        scale_y=s.number("scale_mismatch", "y_um_per_m", UM, -1e4, 1e4),
-        straightness_x_m=s.number("straightness_yaw", "x_um", UM, -1e3, 1e3),
-        straightness_y_m=s.number("straightness_yaw", "y_um", UM, -1e3, 1e3),
-        straightness_x_quartic_m=s.number("straightness_yaw", "x_quartic_um", UM, -1e3, 1e3),
-        length_x_m=lengths[0],
-        length_y_m=lengths[1],
-        axis_centre_m=s.pair("geometry", "axis_centre_mm", 1e-3),
-        yaw_x=s.flag("straightness_yaw", "yaw_x"),
-        yaw_y=s.flag("straightness_yaw", "yaw_y"),
+        machine_squareness_rad=geo.number(_squareness_key(geo, source), -1e4, 1e4) * UM,
+        machine_squareness_rate_rad_s=t["squareness_drift"].number("rate_um_per_m_per_h", -1e4, 1e4)
+        * (UM / HOUR),
+        scale_x=t["scale_mismatch"].number("x_um_per_m", -1e4, 1e4) * UM,
+        scale_y=t["scale_mismatch"].number("y_um_per_m", -1e4, 1e4) * UM,
+        straightness_x_m=yaw.number("x_um", -1e3, 1e3) * UM,
+        straightness_y_m=yaw.number("y_um", -1e3, 1e3) * UM,
+        straightness_x_quartic_m=yaw.number("x_quartic_um", -1e3, 1e3) * UM,
+        length_x_m=lengths[0] * 1e-3,
+        length_y_m=lengths[1] * 1e-3,
+        axis_centre_m=tuple(c * 1e-3 for c in geo.numbers("axis_centre_mm", (2,), pair)),
+        yaw_x=yaw.flag("yaw_x"),
+        yaw_y=yaw.flag("yaw_y"),
     )
+    big = 1e6  # urad/m: a tilt rate above 1 rad/m is a unit mistake
     tilt = tuple(
-        s.number("gravity_coupling", key, UM, -big, big)
-        for key in (
-            "x_per_x_urad_per_m",
-            "x_per_y_urad_per_m",
-            "y_per_x_urad_per_m",
-            "y_per_y_urad_per_m",
-        )
+        t["gravity_coupling"].number(key, -big, big) * UM for key in _LAYOUT["gravity_coupling"]
     )
     return MachineModel(
-        name=s.text("machine", "name"),
+        name=machine.text("name"),
         geometry=geometry,
-        ramp_s=s.number("machine", "ramp_s", 1.0, 0.0, 5.0, lo_open=True),
-        ramp_profile=s.choice("machine", "ramp_profile", RAMP_PROFILES),
-        tau_x_s=s.number("servo_mismatch", "tau_x_ms", MS, 0.0, 1e3),
-        tau_y_s=s.number("servo_mismatch", "tau_y_ms", MS, 0.0, 1e3),
-        servo_model=s.choice("servo_mismatch", "model", SERVO_MODELS),
-        backlash_x_m=s.number("backlash", "x_um", UM, 0.0, 1e3),
-        backlash_y_m=s.number("backlash", "y_um", UM, 0.0, 1e3),
-        backlash_take_up_s=s.number("backlash", "take_up_ms", MS, 0.0, 1e3, lo_open=True),
-        spike_x_m_s2=s.number("reversal_spikes", "peak_x_m_s2", 1.0, 0.0, 100.0),
-        spike_y_m_s2=s.number("reversal_spikes", "peak_y_m_s2", 1.0, 0.0, 100.0),
-        spike_tau_s=s.number("reversal_spikes", "tau_ms", MS, 0.0, 1e3, lo_open=True),
-        vibration_x_m_s2=s.number("structural_vibration", "accel_x_m_s2", 1.0, -100.0, 100.0),
-        vibration_y_m_s2=s.number("structural_vibration", "accel_y_m_s2", 1.0, -100.0, 100.0),
-        vibration_hz=s.number("structural_vibration", "frequency_hz", 1.0, 0.0, 1e4, lo_open=True),
-        vibration_damping=s.number(
-            "structural_vibration", "damping_ratio", 1.0, 0.0, 1.0, lo_open=True, hi_open=True
-        ),
+        ramp_s=machine.number("ramp_s", 0.0, 5.0, lo_open=True),
+        ramp_profile=machine.choice("ramp_profile", RAMP_PROFILES),
+        tau_x_s=servo.number("tau_x_ms", 0.0, 1e3) * MS,
+        tau_y_s=servo.number("tau_y_ms", 0.0, 1e3) * MS,
+        servo_model=servo.choice("model", SERVO_MODELS),
+        backlash_x_m=backlash.number("x_um", 0.0, 1e3) * UM,
+        backlash_y_m=backlash.number("y_um", 0.0, 1e3) * UM,
+        backlash_take_up_s=backlash.number("take_up_ms", 0.0, 1e3, lo_open=True) * MS,
+        spike_x_m_s2=spikes.number("peak_x_m_s2", 0.0, 100.0),
+        spike_y_m_s2=spikes.number("peak_y_m_s2", 0.0, 100.0),
+        spike_tau_s=spikes.number("tau_ms", 0.0, 1e3, lo_open=True) * MS,
+        vibration_x_m_s2=vibration.number("accel_x_m_s2", -100.0, 100.0),
+        vibration_y_m_s2=vibration.number("accel_y_m_s2", -100.0, 100.0),
+        vibration_hz=vibration.number("frequency_hz", 0.0, 1e4, lo_open=True),
+        vibration_damping=vibration.number("damping_ratio", 0.0, 1.0, lo_open=True, hi_open=True),
         tilt_per_m=tilt,
     )
 
@@ -325,4 +319,4 @@ def read_machine(path):
     -------
     MachineModel
     """
-    return machine_from_mapping(load_toml(path), str(path))
+    return machine_from_mapping(read_toml(path, ConfigError), str(path))

@@ -39,8 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from imu_square.errors import ConfigError
-from imu_square.simulate.config import Sections, load_toml
+from imu_square.textfile import read_toml
 from imu_square.units import UG, G
+from imu_square.validation import read_tables
 
 
 @dataclass(frozen=True)
@@ -217,21 +218,6 @@ _LAYOUT = {
 }
 
 
-def _triple(s, section, key, scale, limit):
-    value = s.raw(section, key)
-    if (
-        not isinstance(value, list)
-        or len(value) != 3
-        or any(isinstance(v, bool) or not isinstance(v, int | float) for v in value)
-        or not all(abs(v) <= limit for v in value)
-    ):
-        raise ConfigError(
-            f"{s.source}: [{section}] {key} must be three numbers [x, y, z] within "
-            f"+-{limit:g}, got {value!r}"
-        )
-    return tuple(float(v) * scale for v in value)
-
-
 def sensor_from_mapping(doc, source="<sensor>"):
     """Validate a parsed sensor file and convert it to SI.
 
@@ -251,44 +237,44 @@ def sensor_from_mapping(doc, source="<sensor>"):
     ConfigError
         Naming the file, section and field, what is allowed and what was received.
     """
-    s = Sections(doc, source, _LAYOUT)
-    beta = s.number("sensor", "beta_urad", 1e-6, -1e5, 1e5)
-    drift = s.has("sensor_thermal_drift")
-    if drift and "beta_0_urad" not in doc["sensor_thermal_drift"]:
+    t = read_tables(doc, _LAYOUT, source, ConfigError, terse=True)
+    sensor, drift, gains = t["sensor"], t["sensor_thermal_drift"], t["sensor_gain_mismatch"]
+    beta = sensor.number("beta_urad", -1e5, 1e5) * 1e-6
+    drifts = "sensor_thermal_drift" in doc
+    if drifts and not drift.has("beta_0_urad"):
         raise ConfigError(
             f"{source}: [sensor_thermal_drift] needs beta_0_urad (the non-orthogonality at "
             f"power-on, urad); got only {sorted(doc['sensor_thermal_drift'])!r}"
         )
+
+    def triple(key, scale, limit):
+        what = f"three numbers [x, y, z] within +-{limit:g}"
+        return tuple(v * scale for v in gains.numbers(key, (3,), what, -limit, limit))
+
     return SensorModel(
-        model=s.text("sensor", "model"),
-        sample_rate_hz=s.number("sensor", "sample_rate_hz", 1.0, 0.0, 1e6, lo_open=True),
-        noise_density_m_s2_rthz=s.number("sensor", "noise_density_ug_rthz", UG, 0.0, 1e6),
-        flicker_corner_hz=s.number("sensor", "flicker_corner_hz", 1.0, 0.0, 1e4),
-        range_m_s2=s.number("sensor", "range_g", G, 0.0, math.inf, lo_open=True),
-        resolution_m_s2=s.number("sensor", "resolution_ug", UG, 0.0, 1e6),
-        eps_c_rad=s.number("sensor", "eps_c_deg", math.pi / 180, -180.0, 180.0),
+        model=sensor.text("model"),
+        sample_rate_hz=sensor.number("sample_rate_hz", 0.0, 1e6, lo_open=True),
+        noise_density_m_s2_rthz=sensor.number("noise_density_ug_rthz", 0.0, 1e6) * UG,
+        flicker_corner_hz=sensor.number("flicker_corner_hz", 0.0, 1e4),
+        range_m_s2=sensor.number("range_g", 0.0, math.inf, lo_open=True) * G,
+        resolution_m_s2=sensor.number("resolution_ug", 0.0, 1e6) * UG,
+        eps_c_rad=sensor.number("eps_c_deg", -180.0, 180.0) * (math.pi / 180),
         beta_rad=beta,
-        beta_0_rad=s.number("sensor_thermal_drift", "beta_0_urad", 1e-6, -1e5, 1e5)
-        if drift
-        else None,
-        tau_warm_s=s.number("sensor_thermal_drift", "tau_warm_s", 1.0, 0.0, 1e6, lo_open=True),
-        temperature_c=_temperature(s),
-        temperature_rise_c=s.number("sensor_thermal_drift", "temperature_rise_c", 1.0, -100, 100),
+        beta_0_rad=drift.number("beta_0_urad", -1e5, 1e5) * 1e-6 if drifts else None,
+        tau_warm_s=drift.number("tau_warm_s", 0.0, 1e6, lo_open=True),
+        # no temperature channel unless the file gives the ambient temperature
+        temperature_c=sensor.number("temperature_c", -60.0, 150.0)
+        if sensor.has("temperature_c")
+        else math.nan,
+        temperature_rise_c=drift.number("temperature_rise_c", -100, 100),
         tilt_rad=(
-            s.number("sensor", "tilt_x_urad", 1e-6, -1e5, 1e5),
-            s.number("sensor", "tilt_y_urad", 1e-6, -1e5, 1e5),
+            sensor.number("tilt_x_urad", -1e5, 1e5) * 1e-6,
+            sensor.number("tilt_y_urad", -1e5, 1e5) * 1e-6,
         ),
-        gain=_triple(s, "sensor_gain_mismatch", "gain_percent", 1e-2, 50.0),
-        bias_m_s2=_triple(s, "sensor_gain_mismatch", "bias_mg", 1e-3 * G, 1e4),
-        clock_ppm=s.number("sample_clock_error", "ppm", 1.0, -1e4, 1e4),
+        gain=triple("gain_percent", 1e-2, 50.0),
+        bias_m_s2=triple("bias_mg", 1e-3 * G, 1e4),
+        clock_ppm=t["sample_clock_error"].number("ppm", -1e4, 1e4),
     )
-
-
-def _temperature(s):
-    """The ambient temperature, NaN (no channel) when the file does not give one."""
-    if "temperature_c" not in s.doc.get("sensor", {}):
-        return math.nan
-    return s.number("sensor", "temperature_c", 1.0, -60.0, 150.0)
 
 
 def read_sensor(path):
@@ -303,4 +289,4 @@ def read_sensor(path):
     -------
     SensorModel
     """
-    return sensor_from_mapping(load_toml(path), str(path))
+    return sensor_from_mapping(read_toml(path, ConfigError), str(path))

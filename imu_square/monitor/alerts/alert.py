@@ -22,7 +22,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import PurePath
 
-from imu_square.errors import check_option
+from imu_square.validation import check_option
 
 STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
 # A sink's default: everything a person must act on, not the nightly "ok".

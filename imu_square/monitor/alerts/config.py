@@ -42,12 +42,13 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from imu_square.errors import MonitorConfigError
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES
 from imu_square.monitor.alerts.json_file import JSON_FILE_FIELDS, json_file_from_table
 from imu_square.monitor.alerts.log_line import LOG_FIELDS, LogSink, log_from_table
 from imu_square.monitor.alerts.mail import EMAIL_FIELDS, email_from_table
 from imu_square.monitor.alerts.webhook import WEBHOOK_FIELDS, webhook_from_table
-from imu_square.monitor.fields import Table, tables
+from imu_square.validation import TomlTable, tables
 
 ALERTS_FIELDS = ("states", "attempts", "backoff_s", "max_total_s", "outbox")
 SINK_KINDS = {
@@ -125,27 +126,31 @@ def alerts_from_mapping(table, source="<monitor file>", base_dir=None):
     """
     if table is None:
         return AlertsConfig()
-    top = Table(table, "[alerts]", (*ALERTS_FIELDS, "log", *SINK_KINDS), source, base_dir)
-    default_states = top.choices("states", DEFAULT_ALERT_STATES, STATES)
+
+    def checked(value, where, fields):
+        return TomlTable(value, where, fields, source, base_dir, MonitorConfigError)
+
+    top = checked(table, "[alerts]", (*ALERTS_FIELDS, "log", *SINK_KINDS))
+    default_states = top.choices("states", STATES, default=DEFAULT_ALERT_STATES)
     retry = RetryPolicy(
-        attempts=top.integer("attempts", 4, 1, 10),
-        backoff_s=top.number("backoff_s", 0.5, 0.0, 60.0),
-        max_total_s=top.number("max_total_s", 10.0, 0.0, 300.0, lo_open=True),
+        attempts=top.integer("attempts", 1, 10, default=4),
+        backoff_s=top.number("backoff_s", 0.0, 60.0, default=0.5),
+        max_total_s=top.number("max_total_s", 0.0, 300.0, lo_open=True, default=10.0),
     )
     log = LogSink()
     if top.has("log"):
-        log = log_from_table(Table(table["log"], "[alerts.log]", LOG_FIELDS, source, base_dir))
+        log = log_from_table(checked(table["log"], "[alerts.log]", LOG_FIELDS))
     sinks = [log]
     for kind, (fields, build) in SINK_KINDS.items():
         if not top.has(kind):
             continue
-        labelled = tables(table[kind], f"alerts.{kind}", source)
+        labelled = tables(table[kind], f"alerts.{kind}", source, MonitorConfigError)
         for i, (raw, where) in enumerate(labelled, start=1):
-            t = Table(raw, where, fields, source, base_dir)
-            name = t.text("name", kind if len(labelled) == 1 else f"{kind}-{i}")
+            t = checked(raw, where, fields)
+            name = t.text("name", default=kind if len(labelled) == 1 else f"{kind}-{i}")
             if not _SINK_NAME.fullmatch(name) or name == "log":
                 t.fail("name", "1-64 letters, digits, '_', '.' or '-', and not 'log'", name)
             if any(s.name == name for s in sinks):
                 t.fail("name", "different from every other sink's name", name)
             sinks.append(build(t, name, default_states))
-    return AlertsConfig(sinks=tuple(sinks), retry=retry, outbox=top.path("outbox", None))
+    return AlertsConfig(sinks=tuple(sinks), retry=retry, outbox=top.path("outbox", default=None))

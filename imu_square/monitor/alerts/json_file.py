@@ -106,7 +106,7 @@ def json_file_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
 
     Parameters
     ----------
-    table : Table
+    table : imu_square.validation.TomlTable
         The checked table.
     name : str
         The sink's name when the table does not give one.
@@ -119,7 +119,7 @@ def json_file_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
     """
     return JsonFileSink(
         name=name,
-        states=table.choices("states", default_states, STATES),
+        states=table.choices("states", STATES, default=default_states),
         path=table.path("path"),
-        mode=table.choice("mode", "latest", JSON_FILE_MODES),
+        mode=table.choice("mode", JSON_FILE_MODES, default="latest"),
     )

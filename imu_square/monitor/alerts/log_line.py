@@ -71,11 +71,11 @@ def log_from_table(table):
 
     Parameters
     ----------
-    table : Table
-        The checked table (see :mod:`imu_square.monitor.fields`).
+    table : imu_square.validation.TomlTable
+        The checked table.
 
     Returns
     -------
     LogSink
     """
-    return LogSink(states=table.choices("states", STATES, STATES))
+    return LogSink(states=table.choices("states", STATES, default=STATES))

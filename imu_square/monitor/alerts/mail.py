@@ -46,7 +46,6 @@ from pathlib import Path
 from imu_square.log import logger
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError, one_line
 from imu_square.monitor.alerts.webhook import is_loopback
-from imu_square.monitor.fields import REQUIRED
 
 SECURITY = ("starttls", "ssl", "none")
 DEFAULT_PORTS = {"starttls": 587, "ssl": 465, "none": 25}
@@ -264,7 +263,7 @@ def email_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
 
     Parameters
     ----------
-    table : Table
+    table : imu_square.validation.TomlTable
         The checked table.
     name : str
         The sink's name when the table does not give one.
@@ -276,19 +275,19 @@ def email_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
     EmailSink
     """
     host = table.text("host")
-    security = table.choice("security", "starttls", SECURITY)
-    port = table.integer("port", DEFAULT_PORTS[security], 1, 65535)
-    sender = _address(table, "sender", table.get("sender", REQUIRED))
+    security = table.choice("security", SECURITY, default="starttls")
+    port = table.integer("port", 1, 65535, default=DEFAULT_PORTS[security])
+    sender = _address(table, "sender", table.get("sender"))
     to = table.get("to", None)
     if not isinstance(to, list) or not to:
         table.fail("to", f"a non-empty list of addresses, each {ADDRESS}", to)
     to = tuple(_address(table, "to", addr) for addr in to)
-    username = table.text("username", None)
+    username = table.text("username", default=None)
     if username is not None and not username.isascii():
         # smtplib sends AUTH credentials as ASCII; anything else fails at every login.
         table.fail("username", "ASCII text (SMTP AUTH as smtplib speaks it)", username)
     password_env = table.env_name("password_env")
-    password_file = table.path("password_file", None)
+    password_file = table.path("password_file", default=None)
     if username is None and (password_env or password_file):
         table.error("sets a password but no username")
     if username is not None and (password_env is None) == (password_file is None):
@@ -302,7 +301,7 @@ def email_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
         )
     return EmailSink(
         name=name,
-        states=table.choices("states", default_states, STATES),
+        states=table.choices("states", STATES, default=default_states),
         host=host,
         port=port,
         security=security,
@@ -311,6 +310,6 @@ def email_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
         username=username,
         password_env=password_env,
         password_file=password_file,
-        timeout_s=table.number("timeout_s", 10.0, 0.0, MAX_TIMEOUT_S, lo_open=True),
-        ca_file=table.path("ca_file", None),
+        timeout_s=table.number("timeout_s", 0.0, MAX_TIMEOUT_S, lo_open=True, default=10.0),
+        ca_file=table.path("ca_file", default=None),
     )

@@ -42,7 +42,7 @@ from pathlib import Path
 
 from imu_square import __version__
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError
-from imu_square.monitor.fields import has_control_chars
+from imu_square.validation import has_control_chars
 
 WEBHOOK_FIELDS = (
     "name",
@@ -325,7 +325,7 @@ def webhook_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
 
     Parameters
     ----------
-    table : Table
+    table : imu_square.validation.TomlTable
         The checked table.
     name : str
         The sink's name when the table does not give one.
@@ -357,8 +357,8 @@ def webhook_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
         if not isinstance(value, str) or not is_header_text(value):
             table.fail(f"headers.{key}", HEADER_TEXT, value)
     token_env = table.env_name("token_env")
-    token_header = table.text("token_header", "Authorization")
-    token_prefix = table.text("token_prefix", "Bearer ", empty=True)
+    token_header = table.text("token_header", default="Authorization")
+    token_prefix = table.text("token_prefix", default="Bearer ", empty=True)
     if not is_header_text(token_prefix):
         table.fail("token_prefix", HEADER_TEXT, token_prefix)
     if not _TOKEN.fullmatch(token_header) or token_header.lower() in RESERVED_HEADERS:
@@ -369,13 +369,13 @@ def webhook_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
         table.fail("url", CLEAR_TOKEN, url)
     return WebhookSink(
         name=name,
-        states=table.choices("states", default_states, STATES),
+        states=table.choices("states", STATES, default=default_states),
         url=url,
         url_env=table.env_name("url_env"),
-        timeout_s=table.number("timeout_s", 5.0, 0.0, MAX_TIMEOUT_S, lo_open=True),
+        timeout_s=table.number("timeout_s", 0.0, MAX_TIMEOUT_S, lo_open=True, default=5.0),
         headers=tuple(headers.items()),
         token_env=token_env,
         token_header=token_header,
         token_prefix=token_prefix,
-        ca_file=table.path("ca_file", None),
+        ca_file=table.path("ca_file", default=None),
     )

@@ -24,8 +24,17 @@ import re
 from dataclasses import dataclass, field
 
 from imu_square import __version__
-from imu_square.errors import HistoryError, check_option
+from imu_square.errors import HistoryError
 from imu_square.monitor.history.encoding import datetime_from_ns, json_native, settings_hash
+from imu_square.validation import (
+    check_bool,
+    check_int,
+    check_number,
+    check_option,
+    check_text,
+    fail,
+    is_number,
+)
 
 #: The monitor's verdicts on a run (issue 11, section 5).
 EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
@@ -60,14 +69,12 @@ def _storable(row, name, value):
     return value
 
 
-def _text(row, name, *, optional=False):
+def _text(row, name):
     value = getattr(row, name)
-    if value is None and optional:
-        return
     if isinstance(value, os.PathLike):
         value = os.fspath(value)
-    if not isinstance(value, str) or not value.strip() or "\n" in value or "\r" in value:
-        raise HistoryError(f"{_where(row, name)} must be one line of text, got {value!r}")
+    # a file name is stored as it was given: a tab is allowed, a line break is not
+    check_text(_where(row, name), value, controls=True, error=HistoryError)
     _set(row, name, _storable(row, name, value))
 
 
@@ -82,41 +89,33 @@ def _one_line(row, name):
 
 def _float(row, name, *, required=False):
     value = getattr(row, name)
-    if hasattr(value, "tolist") and hasattr(value, "dtype"):
-        value = value.tolist()
+    if is_number(value) and math.isnan(value):  # NaN is NULL
+        value = None
     if value is not None:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise HistoryError(f"{_where(row, name)} must be a number, got {value!r}")
-        # NaN is NULL; -0.0 is 0.0 (SQLite keeps an integral REAL as an integer).
-        value = float(value) + 0.0
-        if math.isnan(value):
-            value = None
-    if value is None and required:
-        raise HistoryError(f"{_where(row, name)} must be a number, got {getattr(row, name)!r}")
+        # -0.0 is 0.0 (SQLite keeps an integral REAL as an integer)
+        value = check_number(_where(row, name), value, -math.inf, math.inf, error=HistoryError)
+        value += 0.0
+    elif required:
+        fail(_where(row, name), "a number", getattr(row, name), error=HistoryError)
     _set(row, name, value)
 
 
 def _int(row, name, *, optional=True, minimum=None):
     value = getattr(row, name)
-    if hasattr(value, "tolist") and hasattr(value, "dtype"):
-        value = value.tolist()
     if value is None and optional:
         return
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise HistoryError(f"{_where(row, name)} must be an integer, got {value!r}")
-    if not -(2**63) <= value < 2**63:  # BIGINT, and nanoseconds up to the year 2262
-        raise HistoryError(f"{_where(row, name)} must fit in 64 bits, got {value!r}")
+    where, bits = _where(row, name), "a 64-bit integer"
+    # BIGINT, and nanoseconds up to the year 2262
+    value = check_int(
+        where, value, -(2**63), 2**63 - 1, kind="an integer", allowed=bits, error=HistoryError
+    )
     if minimum is not None and value < minimum:
-        raise HistoryError(f"{_where(row, name)} must be at least {minimum}, got {value!r}")
-    _set(row, name, int(value))
+        fail(where, f"at least {minimum}", value, error=HistoryError)
+    _set(row, name, value)
 
 
 def _bool(row, name):
-    value = getattr(row, name)
-    if hasattr(value, "tolist") and hasattr(value, "dtype"):
-        value = value.tolist()
-    if not isinstance(value, bool):
-        raise HistoryError(f"{_where(row, name)} must be True or False, got {value!r}")
+    _set(row, name, check_bool(_where(row, name), getattr(row, name), error=HistoryError))
 
 
 def _json(row, name, kind):
@@ -380,9 +379,10 @@ class BaselineRow:
         ids = self.run_ids
         if isinstance(ids, str | bytes) or not hasattr(ids, "__iter__"):
             raise HistoryError(f"BaselineRow.run_ids must be run ids, got {ids!r}")
-        ids = tuple(int(i) if hasattr(i, "dtype") else i for i in ids)
-        if not ids or not all(isinstance(i, int) and not isinstance(i, bool) for i in ids):
-            raise HistoryError(f"BaselineRow.run_ids must be one or more run ids, got {ids!r}")
+        what = "one or more run ids"
+        ids = tuple(check_int("BaselineRow.run_ids", i, kind=what, error=HistoryError) for i in ids)
+        if not ids:
+            fail("BaselineRow.run_ids", what, ids, error=HistoryError)
         if len(set(ids)) != len(ids):
             raise HistoryError(f"BaselineRow.run_ids must not repeat a run, got {ids!r}")
         _set(self, "run_ids", tuple(sorted(ids)))
@@ -446,7 +446,7 @@ class AnchorRow:
     def __post_init__(self):
         _int(self, "id", minimum=1)
         _int(self, "baseline_id", optional=False, minimum=1)
-        check_option("AnchorRow.method", self.method, ANCHOR_METHODS)
+        check_option("AnchorRow.method", self.method, ANCHOR_METHODS, error=HistoryError)
         _float(self, "value_rad", required=True)
         _float(self, "u_value_rad")
         _json(self, "input", dict)
@@ -491,7 +491,7 @@ class EvaluationRow:
         _int(self, "id", minimum=1)
         _int(self, "run_id", optional=False, minimum=1)
         _int(self, "baseline_id", minimum=1)
-        check_option("EvaluationRow.state", self.state, EVALUATION_STATES)
+        check_option("EvaluationRow.state", self.state, EVALUATION_STATES, error=HistoryError)
         if self.baseline_id is None and self.state not in ("no_baseline", "invalid"):
             raise HistoryError(
                 f"EvaluationRow.baseline_id must name the baseline of a {self.state!r} verdict"

@@ -44,10 +44,10 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from imu_square.errors import MonitorError
+from imu_square.errors import MonitorConfigError, MonitorError
 from imu_square.io.atomic import write_atomic
 from imu_square.monitor.alerts.alert import STATES
-from imu_square.monitor.fields import Table
+from imu_square.validation import TomlTable
 
 METRICS_FIELDS = ("textfile",)
 PREFIX = "imu_square_"
@@ -271,7 +271,7 @@ def metrics_from_mapping(table, source="<monitor file>", base_dir=None):
     """
     if table is None:
         return MetricsConfig()
-    t = Table(table, "[metrics]", METRICS_FIELDS, source, base_dir)
+    t = TomlTable(table, "[metrics]", METRICS_FIELDS, source, base_dir, MonitorConfigError)
     path = t.path("textfile")
     if path.suffix != ".prom":
         t.fail(

@@ -133,6 +133,7 @@ from imu_square.monitor.stats.charts import (
     first_alarms,
 )
 from imu_square.units import URAD
+from imu_square.validation import check_int, check_number, fail, interval, is_number
 
 NIGHTS_PER_YEAR = 365.25
 STATES = ("ok", "warning", "alarm")
@@ -465,9 +466,8 @@ def _from_json_floats(d):
 def _check_nu(name, nu):
     if nu is None:
         return None
-    if not (isinstance(nu, int | float) and math.isfinite(nu) and nu >= 1):
-        raise MonitorError(f"{name} must be None (normal) or a number >= 1, got {nu!r}")
-    return float(nu)
+    within = "None (normal) or a number >= 1"
+    return check_number(name, nu, 1.0, kind=within, allowed=within, error=MonitorError)
 
 
 def design_alarms(
@@ -539,18 +539,17 @@ def design_alarms(
     sigma = _number("sigma_rad", sigma_rad, lo=0.0, closed=False, unit="rad")
     step = _number("step_rad", step_rad, lo=0.0, closed=False, unit="rad")
     ramp = _number("ramp_rad", ramp_rad, lo=0.0, closed=False, unit="rad")
-    if not (isinstance(ramp_nights, int | np.integer) and ramp_nights >= 1):
-        raise MonitorError(f"ramp_nights must be an integer >= 1, got {ramp_nights!r}")
+    ramp_nights = _count("ramp_nights", ramp_nights, 1)
     nu = _check_nu("nu", nu)
     rho = _number("baseline_sd_ratio", baseline_sd_ratio, lo=0.0, hi=2.0)
     lam = _number("ewma_lambda", ewma_lambda, lo=0.0, hi=1.0, closed=False)
     shares = tuple(shares)
     if not (
         len(shares) == 3
-        and all(isinstance(v, int | float) and math.isfinite(v) and v > 0 for v in shares)
+        and all(is_number(v) and 0 < v < math.inf for v in shares)
         and abs(sum(shares) - 1.0) < 1e-9
     ):
-        raise MonitorError(f"shares must be 3 numbers > 0 summing to 1, got {shares!r}")
+        fail("shares", "3 numbers > 0 summing to 1", shares, error=MonitorError)
     shares = tuple(float(v) for v in shares)
     wfrac = _number("warning_fraction", warning_fraction, lo=0.0, hi=0.5, closed=False)
     delta = step / sigma
@@ -558,9 +557,7 @@ def design_alarms(
         k = max(0.5 * delta, _K_BASELINE_FACTOR * rho)
     else:
         k = _number("cusum_k", cusum_k, lo=0.0)
-    if not (isinstance(mc_nights, int | np.integer) and mc_nights >= 100_000):
-        raise MonitorError(f"mc_nights must be an integer >= 100000, got {mc_nights!r}")
-    mc_paths, mc_span = _mc_size(arl0, int(mc_nights))
+    mc_paths, mc_span = _mc_size(arl0, _count("mc_nights", mc_nights, 100_000))
     seeds = np.random.SeedSequence(seed).spawn(6)
 
     law = NightLaw(nu)
@@ -679,17 +676,18 @@ def design_alarms(
     )
 
 
-def _number(name, value, lo=-math.inf, hi=math.inf, closed=True, unit=""):
-    """``value`` as a float within ``[lo, hi]`` (``(lo, hi]`` unless ``closed``), or raise."""
-    unit = f" {unit}" if unit else ""
-    ok = isinstance(value, int | float | np.number) and math.isfinite(value) and value <= hi
-    ok = ok and (value >= lo if closed else value > lo)
-    if not ok:
-        left = "[" if closed else "("
-        raise MonitorError(
-            f"{name} must be a number within {left}{lo:g}, {hi:g}]{unit}, got {value!r}"
-        )
-    return float(value)
+def _number(name, value, lo, hi=math.inf, closed=True, unit=""):
+    """``value`` as a finite float within ``[lo, hi]`` (``(lo, hi]`` unless ``closed``)."""
+    within = f"a number within {interval(lo, hi, not closed)}{f' {unit}' if unit else ''}"
+    hi = hi if math.isfinite(hi) else None  # shown as a bound, but never taken
+    kw = {"kind": within, "allowed": within, "error": MonitorError}
+    return check_number(name, value, lo, hi, lo_open=not closed, **kw)
+
+
+def _count(name, value, lo):
+    """``value`` as an int, at least ``lo``."""
+    at_least = f"an integer >= {lo}"
+    return check_int(name, value, lo, kind=at_least, allowed=at_least, error=MonitorError)
 
 
 def _mc_size(arl0, mc_nights):
