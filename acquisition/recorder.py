@@ -31,7 +31,6 @@ write that fails part-way (disk full) stops the recording and raises
 """
 
 import collections
-import math
 import queue
 import threading
 import time
@@ -56,6 +55,7 @@ from imu_square.io.output import check_free_space, check_output_path
 from imu_square.io.recording import Event, SensorInfo
 from imu_square.io.runlog import parse_detail
 from imu_square.log import logger
+from imu_square.validation import check_number
 
 HEADER_TIMEOUT_S = 5.0
 HEADER_RETRY_S = 0.5
@@ -74,10 +74,16 @@ def _check_seconds(name, value, *, allow_none=False, allow_zero=False):
     """Refuse a time that is not a finite number of seconds above 0 (or 0 when allowed)."""
     if value is None and allow_none:
         return
-    number = isinstance(value, int | float) and not isinstance(value, bool)
-    if not (number and math.isfinite(value) and (value >= 0 if allow_zero else value > 0)):
-        bound = ">= 0" if allow_zero else "> 0"
-        raise AcquisitionError(f"{name} must be a number of seconds {bound}, got {value!r}")
+    seconds = f"a number of seconds {'>= 0' if allow_zero else '> 0'}"
+    check_number(
+        name,
+        value,
+        0.0,
+        lo_open=not allow_zero,
+        kind=seconds,
+        allowed=seconds,
+        error=AcquisitionError,
+    )
 
 
 def _identity(header):
