@@ -32,17 +32,12 @@ References
 """
 
 from dataclasses import dataclass
-from itertools import product
 
 import numpy as np
 
 from imu_square.errors import ImuSquareError, check_option
 
 _AXES = "XYZ"
-
-
-def _corner_points(ranges):
-    return np.array(list(product(*ranges)), dtype=float)
 
 
 def face_diagonals(x_range, y_range):
