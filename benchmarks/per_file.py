@@ -62,6 +62,12 @@ import imu_square.pipeline.squareness as sq
 from imu_square.io.mcap import read_mcap
 import numpy as np
 off = os.environ.get("PER_FILE_OFF")  # --trick: the library calls a trick replaces, in its place
+if off == "blas":  # OpenBLAS's own default, a thread per core: no limit while analysing
+    import contextlib, imu_square.blas
+    class _NoLimit:
+        def limit(self, **kwargs):
+            return contextlib.nullcontext()
+    imu_square.blas._controller = _NoLimit
 if off == "trig":
     import imu_square.pipeline.noise_floor as nf, imu_square.pipeline.segment as seg
     cos_sin = lambda x, out: (np.cos(x, out=out[0]), np.sin(x, out=out[1]))
@@ -138,9 +144,10 @@ def start_worker(code_root, mcap, allocator, off=None):
     env["PER_FILE_ALLOCATOR"] = allocator
     env["IMU_SQUARE_MALLOC_TUNING"] = "0"  # the worker's own switch decides, on both sides
     env.setdefault("OMP_NUM_THREADS", "1")
-    if off == "blas":  # OpenBLAS's own default: a thread per core
+    if off == "blas":  # OpenBLAS's own default: a thread per core (and no limit: the worker)
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             env.pop(var, None)
+        env["PER_FILE_OFF"] = off
     elif off == "allocator":
         env["PER_FILE_ALLOCATOR"] = "default"
     elif off:

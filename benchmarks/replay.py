@@ -19,15 +19,12 @@ Usage::
 
 import argparse
 import json
-import os
 import shutil
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
-
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from imu_square.allocator import tune_allocator
 from imu_square.io.mcap import write_mcap

@@ -112,6 +112,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy import special, stats
 
+from imu_square.blas import one_blas_thread
 from imu_square.errors import MonitorError
 from imu_square.log import logger
 from imu_square.monitor.stats.arl import (
@@ -470,6 +471,7 @@ def _check_nu(name, nu):
     return float(nu)
 
 
+@one_blas_thread()  # integral equations of 50-400 unknowns (imu_square.blas)
 def design_alarms(
     arl0_nights,
     sigma_rad,
