@@ -17,16 +17,17 @@ the nearer to a quiet core); the two results are compared too (difference of
 
 ``--allocator`` (default ``both``, one after the other): ``default`` runs both
 sides with glibc's malloc as it comes, the code alone; ``tuned`` runs both
-with the mmap and trim thresholds that :mod:`imu_square.allocator` sets in the
-processes that analyse files (32 MB, 128 MB), so the ratio is still the
-code's, and the total is what ``replay`` and ``analyze`` see.
+with the mmap and trim thresholds (32 MB, 128 MB) that the replay's worker
+processes start with (``GLIBC_TUNABLES``, :data:`imu_square.monitor.replay.ALLOCATOR_TUNABLES`),
+so the ratio is still the code's, and the total is what a replay worker sees.
 
 ``--trick NAME...`` measures this checkout against itself instead: one worker
 with every speed trick on, and one per named trick with that trick switched off
 (its library call swapped in), asked in a shuffled order each round; ``none``
-switches nothing off (the spread of two identical workers). ``blas`` (OpenBLAS's
-own thread count instead of one) is measured apart: its threads spin on after
-a call and would slow the other workers' runs.
+switches nothing off (the spread of two identical workers), ``allocator`` runs
+with glibc's defaults. ``blas`` (OpenBLAS's own thread count instead of one) is
+measured apart: its threads spin on after a call and would slow the other
+workers' runs.
 
 Usage::
 
@@ -47,20 +48,18 @@ import sys
 import tempfile
 from pathlib import Path
 
+from imu_square.monitor.replay import ALLOCATOR_TUNABLES
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results" / "per_file.json"
-TRICKS = ("none", "trig", "order_stats", "allocator", "blas")
+TRICKS = ("none", "allocator", "blas")
 STAGES = ("read", "filter", "segment", "cycles", "fits", "noise", "other", "total", "total_cpu")
 
 WORKER = r"""
-import ctypes, json, os, sys, time
-if os.environ.get("PER_FILE_ALLOCATOR") == "tuned":  # as imu_square.allocator, on both sides
-    libc = ctypes.CDLL(None)
-    assert libc.mallopt(-3, 32 * 1024 * 1024) == 1 and libc.mallopt(-1, 128 * 1024 * 1024) == 1
+import json, os, sys, time
 import imu_square.pipeline.squareness as sq
 from imu_square.io.mcap import read_mcap
-import numpy as np
 off = os.environ.get("PER_FILE_OFF")  # --trick: the library calls a trick replaces, in its place
 if off == "blas":  # OpenBLAS's own default, a thread per core: no limit while analysing
     import contextlib, imu_square.blas
@@ -68,18 +67,6 @@ if off == "blas":  # OpenBLAS's own default, a thread per core: no limit while a
         def limit(self, **kwargs):
             return contextlib.nullcontext()
     imu_square.blas._controller = _NoLimit
-if off == "trig":
-    import imu_square.pipeline.noise_floor as nf, imu_square.pipeline.segment as seg
-    cos_sin = lambda x, out: (np.cos(x, out=out[0]), np.sin(x, out=out[1]))
-    seg.cos_sin = nf.cos_sin = cos_sin
-elif off == "order_stats":
-    import imu_square.pipeline.noise_floor as nf, imu_square.pipeline.segment as seg
-    import imu_square.pipeline.sine_fit as sf
-    seg.median = lambda a: float(np.median(a))
-    seg.column_medians = lambda a: np.median(a, axis=0)
-    seg.quantile = lambda a, q: float(np.quantile(a, q))
-    sf.row_medians = nf.row_medians = lambda a, overwrite_input=False: np.median(
-        a, axis=-1, overwrite_input=overwrite_input)
 from imu_square.monitor.config import AnalysisSettings
 
 path = sys.argv[1]
@@ -141,16 +128,13 @@ def baseline_tree(commit):
 
 def start_worker(code_root, mcap, allocator, off=None):
     env = dict(os.environ, PYTHONPATH=str(code_root), OPENBLAS_NUM_THREADS="1")
-    env["PER_FILE_ALLOCATOR"] = allocator
-    env["IMU_SQUARE_MALLOC_TUNING"] = "0"  # the worker's own switch decides, on both sides
+    env.pop("GLIBC_TUNABLES", None)
+    if allocator == "tuned" and off != "allocator":  # read by glibc when the worker starts
+        env["GLIBC_TUNABLES"] = ALLOCATOR_TUNABLES
     env.setdefault("OMP_NUM_THREADS", "1")
     if off == "blas":  # OpenBLAS's own default: a thread per core (and no limit: the worker)
         for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
             env.pop(var, None)
-        env["PER_FILE_OFF"] = off
-    elif off == "allocator":
-        env["PER_FILE_ALLOCATOR"] = "default"
-    elif off:
         env["PER_FILE_OFF"] = off
     return subprocess.Popen(
         [sys.executable, "-c", WORKER, str(mcap)],
@@ -173,7 +157,7 @@ def ask(worker):
 
 ALLOCATOR_NOTE = {
     "default": "glibc's defaults: the code alone",
-    "tuned": "glibc's mmap/trim thresholds raised as imu_square.allocator does",
+    "tuned": "glibc's mmap/trim thresholds raised as in the replay's worker processes",
 }
 
 
@@ -303,8 +287,8 @@ def main(argv=None):
         "--allocator",
         choices=("default", "tuned", "both"),
         default="both",
-        help="glibc's defaults (the code alone), the thresholds imu_square.allocator sets in "
-        "the processes that analyse files, or both in turn (default); each on both sides",
+        help="glibc's defaults (the code alone), the thresholds the replay's worker processes "
+        "start with, or both in turn (default); each on both sides",
     )
     parser.add_argument(
         "--recording",

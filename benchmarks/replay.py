@@ -26,7 +26,6 @@ import tempfile
 import time
 from pathlib import Path
 
-from imu_square.allocator import tune_allocator
 from imu_square.io.mcap import write_mcap
 from imu_square.monitor.config import AnalysisSettings
 from imu_square.monitor.history.store import open_history
@@ -78,9 +77,6 @@ def main(argv=None):
     parser.add_argument("--jobs1-files", type=int, default=200)
     parser.add_argument("--keep", help="keep (or reuse) the recordings in this folder")
     args = parser.parse_args(argv)
-    # As the replay command does: --jobs 1 analyses in this process (imu_square.allocator);
-    # the pool's workers and Dask's tasks tune theirs themselves.
-    tune_allocator()
     folder = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="imu-replay-"))
     folder.mkdir(parents=True, exist_ok=True)
     try:
