@@ -57,8 +57,9 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   between the overshoots), and ``feed``, the index of the block's feed;
 - ``reversal_times_s``: ``{"x": [...], "y": [...]}``, when each actual axis
   reverses (servo lag included), from the first sample;
-- the keys of :data:`LEGACY_KEYS`, written until the next release under their
-  old names.
+- ``alpha_rad``, ``beta_rad``, ``local_squareness_rad``,
+  ``expected_theta_diff_exact_rad`` and ``expected_theta_diff_rad``: an earlier
+  release's names, written until the next release.
 """
 
 import math
@@ -68,17 +69,6 @@ import numpy as np
 
 from imu_square.simulate.kinematics import servo_response
 from imu_square.units import G
-
-# Keys an earlier release wrote, each with the key that replaces it. They are
-# still written for one release; ``expected_theta_diff_rad`` was the first-order
-# form of ``expected_squareness_rad`` and keeps its old value.
-LEGACY_KEYS = {
-    "alpha_rad": "machine_squareness_rad",
-    "beta_rad": "sensor_squareness_rad",
-    "local_squareness_rad": "local_machine_squareness_rad",
-    "expected_theta_diff_exact_rad": "expected_squareness_rad",
-    "expected_theta_diff_rad": "expected_squareness_rad",
-}
 
 
 def _gravity_phases(program, machine):
@@ -287,7 +277,9 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         "program": program.to_mapping(),
         "blocks": blocks,
         "reversal_times_s": reversals,
-        # legacy keys (LEGACY_KEYS), for one release
+        # An earlier release's names, written for one release more: machine_squareness_rad,
+        # sensor_squareness_rad, local_machine_squareness_rad, expected_squareness_rad, and
+        # its first-order form, which keeps its old value.
         "alpha_rad": alpha,
         "beta_rad": beta,
         "local_squareness_rad": local,

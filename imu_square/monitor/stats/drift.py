@@ -40,7 +40,6 @@ import numpy as np
 from imu_square.errors import AnalysisError
 from imu_square.units import URAD
 
-REGRESSORS = ("temperature_c", "time_since_power_on_s")
 # A slope is "significant" below this p-value (two-sided t-test).
 SIGNIFICANCE = 0.05
 
@@ -139,7 +138,7 @@ def cycle_drift_variable(result, recording):
     Returns
     -------
     regressor : str
-        One of :data:`REGRESSORS`.
+        ``"temperature_c"`` or ``"time_since_power_on_s"``.
     x_ccw, x_cw : ndarray, shape (n_pairs,)
         The variable over each CCW and each CW cycle. [degC or s]
     """
@@ -215,7 +214,7 @@ def fit_run_drift(values_rad, u_rad, x, regressor, reference=None):
     x : array_like, shape (n_runs,)
         Each run's mean drift variable. [degC or s]
     regressor : str
-        One of :data:`REGRESSORS`.
+        ``"temperature_c"`` or ``"time_since_power_on_s"``.
     reference : float, optional
         ``x_ref`` [degC or s]; the runs' mean if None.
 
