@@ -161,14 +161,11 @@ ALLOCATOR_NOTE = {
 }
 
 
-def measure(old_root, mcap, allocator, args, off=None):
-    """Interleaved runs of both sides under one allocator setting; medians and differences.
-
-    With ``off`` (a trick's name), "old" is this checkout with that trick switched off.
-    """
+def measure(old_root, mcap, allocator, args):
+    """Interleaved runs of both sides under one allocator setting; medians and differences."""
     load_before = os.getloadavg()
     workers = {
-        "old": start_worker(old_root, mcap, allocator, off),
+        "old": start_worker(old_root, mcap, allocator),
         "new": start_worker(ROOT, mcap, allocator),
     }
     try:
