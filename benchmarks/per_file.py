@@ -311,7 +311,7 @@ def main(argv=None):
         if args.recording:
             from imu_square.io.mcap import read_mcap
 
-            mcap = Path(args.recording)
+            mcap = Path(args.recording).resolve()  # the workers run in their own trees
             rec = read_mcap(mcap)
             duration, n = rec.duration_s, rec.n_samples
         else:
@@ -368,7 +368,7 @@ def main_tricks(args):
 
 def _recording(args, tmp):
     if args.recording:
-        return Path(args.recording), str(args.recording)
+        return Path(args.recording).resolve(), str(args.recording)
     mcap = Path(tmp) / "run.mcap"
     make_recording(mcap, args.seed)
     return mcap, f"the paper's test with a servo mismatch, seed {args.seed}"
