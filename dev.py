@@ -3,7 +3,7 @@
 
     python3 dev.py nightly [ARGS...]   # the monitor's nightly run on a demonstration machine
     python3 dev.py test [PYTEST ARGS]  # the whole test suite
-    python3 dev.py lint                # ruff check and format check
+    python3 dev.py lint                # ruff check, format check, vulture (dead code)
     python3 dev.py run ARGS...         # any imu-square command
 
 The first call creates ``.venv`` next to this file and installs the project
@@ -56,7 +56,11 @@ def main(argv):
         return _run([str(BIN / "imu-square"), *rest])
     if what == "lint":
         ruff = str(BIN / "ruff")
-        return _run([ruff, "check", "."]) or _run([ruff, "format", "--check", "."])
+        return (
+            _run([ruff, "check", "."])
+            or _run([ruff, "format", "--check", "."])
+            or _run([str(BIN / "vulture")])  # paths and whitelist: [tool.vulture]
+        )
     code = _run([str(BIN / "python"), "-m", "pytest", *rest])
     if code == 5:  # pytest found no tests: that is a failure here, never a pass
         print("dev.py: pytest collected no tests", file=sys.stderr)

@@ -17,9 +17,6 @@ CRC-16/CCITT-FALSE (line) 0x1021      0xFFFF      false  false   0x0000      0x2
 import binascii
 import zlib
 
-CRC32_CHECK = 0xCBF43926
-CRC16_CHECK = 0x29B1
-
 
 def crc32(data):
     """CRC-32/ISO-HDLC (the zlib, Ethernet and PNG CRC) of ``data``.

@@ -59,10 +59,10 @@ from scipy import stats
 from imu_square.errors import AnalysisError
 from imu_square.monitor.stats.alarms import (
     NIGHTS_PER_YEAR,
-    baseline_effect,
     design_alarms,
     to_design_law,
 )
+from imu_square.monitor.stats.arl import Cusum, Ewma, NightLaw, Shewhart, baseline_average
 from imu_square.monitor.stats.charts import (
     CHARTS,
     ChartLimits,
@@ -306,6 +306,38 @@ class RescaledSampler:
     def draw(self, rng, paths, first, n):
         z = rng.standard_normal((paths.size, n)) + self.offsets[paths][:, None]
         return z / np.sqrt(rng.chisquare(self.nu, size=z.shape) / self.nu + self.ratio**2)
+
+
+def baseline_effect(design, baseline_sd_ratios):
+    """What a baseline's error does to a design's in-control run lengths.
+
+    Parameters
+    ----------
+    design : AlarmDesign
+        A design (its limits are kept as they are).
+    baseline_sd_ratios : sequence of float
+        Baseline standard errors over the night's sigma (``1/sqrt(N)`` for N runs). [1]
+
+    Returns
+    -------
+    list of dict
+        Per ratio and chart: ``rate_arl`` (one over the false-alarm rate
+        averaged over baselines), ``mean_arl`` (``E[ARL0]``) and ``p10_arl``
+        (one baseline in ten does worse). [nights]
+    """
+    law = NightLaw(design.nu)
+    charts = {
+        "shewhart": Shewhart(design.shewhart.limit),
+        "ewma": Ewma(design.ewma.parameter, design.ewma.limit),
+        "cusum": Cusum(design.cusum.parameter, design.cusum.limit),
+    }
+    out = []
+    for rho in baseline_sd_ratios:
+        row = {"baseline_sd_ratio": float(rho)}
+        for name, chart in charts.items():
+            row[name] = baseline_average(chart, law, float(rho))
+        out.append(row)
+    return out
 
 
 def _baseline_table(pool_check, sigma, runs, args, rng):

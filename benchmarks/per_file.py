@@ -17,39 +17,56 @@ the nearer to a quiet core); the two results are compared too (difference of
 
 ``--allocator`` (default ``both``, one after the other): ``default`` runs both
 sides with glibc's malloc as it comes, the code alone; ``tuned`` runs both
-with the mmap and trim thresholds that :mod:`imu_square.allocator` sets in the
-processes that analyse files (32 MB, 128 MB), so the ratio is still the
-code's, and the total is what ``replay`` and ``analyze`` see.
+with the mmap and trim thresholds (32 MB, 128 MB) that the replay's worker
+processes start with (``GLIBC_TUNABLES``, :data:`imu_square.monitor.replay.ALLOCATOR_TUNABLES`),
+so the ratio is still the code's, and the total is what a replay worker sees.
+
+``--trick NAME...`` measures this checkout against itself instead: one worker
+with every speed trick on, and one per named trick with that trick switched off
+(its library call swapped in), asked in a shuffled order each round; ``none``
+switches nothing off (the spread of two identical workers), ``allocator`` runs
+with glibc's defaults. ``blas`` (OpenBLAS's own thread count instead of one) is
+measured apart: its threads spin on after a call and would slow the other
+workers' runs.
 
 Usage::
 
     python benchmarks/per_file.py [--runs 21] [--baseline PATH] [--baseline-commit 28f8832]
                                   [--allocator default|tuned|both] [--recording RUN.mcap]
+    python benchmarks/per_file.py --trick none allocator blas [--recording RUN.mcap]
 
-Writes ``benchmarks/results/per_file.json``.
+Writes ``benchmarks/results/per_file.json`` (or ``--output``).
 """
 
 import argparse
 import json
 import os
+import random
 import statistics
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+from imu_square.monitor.replay import ALLOCATOR_TUNABLES
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RESULTS = HERE / "results" / "per_file.json"
+TRICKS = ("none", "allocator", "blas")
 STAGES = ("read", "filter", "segment", "cycles", "fits", "noise", "other", "total", "total_cpu")
 
 WORKER = r"""
-import ctypes, json, os, sys, time
-if os.environ.get("PER_FILE_ALLOCATOR") == "tuned":  # as imu_square.allocator, on both sides
-    libc = ctypes.CDLL(None)
-    assert libc.mallopt(-3, 32 * 1024 * 1024) == 1 and libc.mallopt(-1, 128 * 1024 * 1024) == 1
+import json, os, sys, time
 import imu_square.pipeline.squareness as sq
 from imu_square.io.mcap import read_mcap
+off = os.environ.get("PER_FILE_OFF")  # --trick: the library calls a trick replaces, in its place
+if off == "blas":  # OpenBLAS's own default, a thread per core: no limit while analysing
+    import contextlib, imu_square.blas
+    class _NoLimit:
+        def limit(self, **kwargs):
+            return contextlib.nullcontext()
+    imu_square.blas._controller = _NoLimit
 from imu_square.monitor.config import AnalysisSettings
 
 path = sys.argv[1]
@@ -109,11 +126,16 @@ def baseline_tree(commit):
     return path
 
 
-def start_worker(code_root, mcap, allocator):
+def start_worker(code_root, mcap, allocator, off=None):
     env = dict(os.environ, PYTHONPATH=str(code_root), OPENBLAS_NUM_THREADS="1")
-    env["PER_FILE_ALLOCATOR"] = allocator
-    env["IMU_SQUARE_MALLOC_TUNING"] = "0"  # the worker's own switch decides, on both sides
+    env.pop("GLIBC_TUNABLES", None)
+    if allocator == "tuned" and off != "allocator":  # read by glibc when the worker starts
+        env["GLIBC_TUNABLES"] = ALLOCATOR_TUNABLES
     env.setdefault("OMP_NUM_THREADS", "1")
+    if off == "blas":  # OpenBLAS's own default: a thread per core (and no limit: the worker)
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+            env.pop(var, None)
+        env["PER_FILE_OFF"] = off
     return subprocess.Popen(
         [sys.executable, "-c", WORKER, str(mcap)],
         cwd=str(code_root),
@@ -135,7 +157,7 @@ def ask(worker):
 
 ALLOCATOR_NOTE = {
     "default": "glibc's defaults: the code alone",
-    "tuned": "glibc's mmap/trim thresholds raised as imu_square.allocator does",
+    "tuned": "glibc's mmap/trim thresholds raised as in the replay's worker processes",
 }
 
 
@@ -187,6 +209,70 @@ def measure(old_root, mcap, allocator, args):
     }
 
 
+def measure_tricks(mcap, tricks, args):
+    """This checkout with every trick on, and with each trick off in turn, interleaved.
+
+    One worker per setting, all under the tuned allocator (as ``analyze`` runs) but
+    the allocator's own row; each round asks every worker once, in a shuffled order
+    (a fixed rotation would always run the same worker after the same other, and
+    OpenBLAS's threads spin on after a call: they slow whichever run comes next).
+    ``none`` switches nothing off: the spread between two identical workers.
+    Returns each trick's medians and the milliseconds it saves of the per-file time.
+    """
+    rng = random.Random(args.seed)
+    load_before = os.getloadavg()
+    workers = {"on": start_worker(ROOT, mcap, "tuned")}
+    workers.update({t: start_worker(ROOT, mcap, "tuned", off=t) for t in tricks})
+    names = list(workers)
+    runs = {name: [] for name in names}
+    try:
+        for _ in range(args.warmup):
+            for w in workers.values():
+                ask(w)
+        for _ in range(args.runs):
+            for name in rng.sample(names, len(names)):
+                runs[name].append(ask(workers[name]))
+    finally:
+        for w in workers.values():
+            w.stdin.close()
+            w.wait(timeout=30)
+    medians = {
+        name: {s: statistics.median(r["times"].get(s, 0.0) for r in runs[name]) for s in STAGES}
+        for name in names
+    }
+    on = runs["on"]
+    result = {"load_before": load_before, "load_after": os.getloadavg(), "median_s": medians}
+    result["tricks"] = {}
+    for t in tricks:
+        pairs = zip(on, runs[t], strict=True)
+        saved = [b["times"]["total"] - a["times"]["total"] for a, b in pairs]
+        result["tricks"][t] = {
+            "saved_ms_median_of_pairs": 1e3 * statistics.median(saved),
+            "saved_ms_of_medians": 1e3 * (medians[t]["total"] - medians["on"]["total"]),
+            "share_of_per_file_time": statistics.median(saved) / medians["on"]["total"],
+            "squareness_over_crb": (runs[t][-1]["squareness_rad"] - on[-1]["squareness_rad"])
+            / on[-1]["crb_rad"],
+            "u_squareness_rel": runs[t][-1]["u_squareness_rad"] / on[-1]["u_squareness_rad"] - 1,
+        }
+    return result
+
+
+def print_tricks(r, args):
+    """The tricks' table: per-file time with all on, each one's saving and share."""
+    on = 1e3 * r["median_s"]["on"]["total"]
+    print(
+        f"\n{args.runs} interleaved rounds, load {r['load_before'][0]:.2f} -> "
+        f"{r['load_after'][0]:.2f} (1-min average, 2 cores); all tricks on: {on:.1f} ms a file"
+    )
+    print(f"{'trick':12s} {'off [ms]':>9s} {'saved [ms]':>11s} {'share':>7s} {'d sq/CRB':>9s}")
+    for t, v in r["tricks"].items():
+        off = 1e3 * r["median_s"][t]["total"]
+        print(
+            f"{t:12s} {off:9.1f} {v['saved_ms_median_of_pairs']:11.1f} "
+            f"{100 * v['share_of_per_file_time']:6.1f}% {v['squareness_over_crb']:9.1e}"
+        )
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=21, help="timed runs per side (>= 15)")
@@ -198,8 +284,8 @@ def main(argv=None):
         "--allocator",
         choices=("default", "tuned", "both"),
         default="both",
-        help="glibc's defaults (the code alone), the thresholds imu_square.allocator sets in "
-        "the processes that analyse files, or both in turn (default); each on both sides",
+        help="glibc's defaults (the code alone), the thresholds the replay's worker processes "
+        "start with, or both in turn (default); each on both sides",
     )
     parser.add_argument(
         "--recording",
@@ -207,7 +293,17 @@ def main(argv=None):
         help="time this recording instead of the paper's test with a servo mismatch (e.g. one "
         "of benchmarks/replay.py's: a typical machine, whose spikes cost the robust fits more)",
     )
+    parser.add_argument(
+        "--trick",
+        nargs="+",
+        choices=TRICKS,
+        help="instead of a baseline: this checkout with each named speed trick switched off "
+        "in turn (its library call swapped in), against all on, interleaved",
+    )
+    parser.add_argument("--output", default=str(RESULTS), help="the JSON file to write")
     args = parser.parse_args(argv)
+    if args.trick:
+        return main_tricks(args)
     old_root = Path(args.baseline) if args.baseline else baseline_tree(args.baseline_commit)
     modes = ("default", "tuned") if args.allocator == "both" else (args.allocator,)
     result = {"baseline": str(old_root), "runs": args.runs, "allocators": {}}
@@ -215,7 +311,7 @@ def main(argv=None):
         if args.recording:
             from imu_square.io.mcap import read_mcap
 
-            mcap = Path(args.recording)
+            mcap = Path(args.recording).resolve()  # the workers run in their own trees
             rec = read_mcap(mcap)
             duration, n = rec.duration_s, rec.n_samples
         else:
@@ -254,9 +350,35 @@ def main(argv=None):
             f"{1e3 * code['new']['total']:.1f} (code alone), new with the tuned allocator "
             f"{1e3 * tuned['new']['total']:.1f} (old with it {1e3 * tuned['old']['total']:.1f})"
         )
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=1))
-    print(f"wrote {RESULTS}")
+    write(result, args.output)
+
+
+def main_tricks(args):
+    with tempfile.TemporaryDirectory(prefix="imu-per-file-") as tmp:
+        mcap, source = _recording(args, tmp)
+        result = {"recording": source, "runs": args.runs, "groups": []}
+        # The BLAS threads' spinning would slow the other workers' runs: measured apart.
+        groups = [[t for t in args.trick if t != "blas"], [t for t in args.trick if t == "blas"]]
+        for group in filter(None, groups):
+            result["groups"].append(measure_tricks(mcap, group, args))
+    for group in result["groups"]:
+        print_tricks(group, args)
+    write(result, args.output)
+
+
+def _recording(args, tmp):
+    if args.recording:
+        return Path(args.recording).resolve(), str(args.recording)
+    mcap = Path(tmp) / "run.mcap"
+    make_recording(mcap, args.seed)
+    return mcap, f"the paper's test with a servo mismatch, seed {args.seed}"
+
+
+def write(result, output):
+    path = Path(output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result, indent=1))
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

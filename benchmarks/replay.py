@@ -19,7 +19,6 @@ Usage::
 
 import argparse
 import json
-import os
 import shutil
 import statistics
 import sys
@@ -27,9 +26,6 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-from imu_square.allocator import tune_allocator
 from imu_square.io.mcap import write_mcap
 from imu_square.monitor.config import AnalysisSettings
 from imu_square.monitor.history.store import open_history
@@ -81,9 +77,6 @@ def main(argv=None):
     parser.add_argument("--jobs1-files", type=int, default=200)
     parser.add_argument("--keep", help="keep (or reuse) the recordings in this folder")
     args = parser.parse_args(argv)
-    # As the replay command does: --jobs 1 analyses in this process (imu_square.allocator);
-    # the pool's workers and Dask's tasks tune theirs themselves.
-    tune_allocator()
     folder = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="imu-replay-"))
     folder.mkdir(parents=True, exist_ok=True)
     try:

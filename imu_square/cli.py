@@ -35,11 +35,6 @@ from pathlib import Path
 from imu_square import __version__
 from imu_square.errors import ImuSquareError, OutputWriteError
 
-# The analysis solves many small systems: a threaded BLAS only adds overhead (45 times
-# slower on a busy 2-core machine, measured). Nothing above imports NumPy yet.
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
 EXIT_OK = 0
 EXIT_USER_ERROR = 2
 EXIT_INCOMPLETE = 3

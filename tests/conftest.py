@@ -2,6 +2,7 @@
 
 import os
 
-# As the CLI does (imu_square/cli.py): single-threaded BLAS for the many small solves.
+# Single-threaded BLAS for the tests' many small solves, in every process they start
+# (the library limits its own analysis and alarm design: imu_square/blas.py).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")

@@ -1,8 +1,9 @@
-"""glibc's thresholds raised in the processes that analyse files, and only there.
+"""glibc's thresholds raised in the replay's worker processes, and only there.
 
-Each check runs in a fresh interpreter (the setting is for the whole process)
-and asks glibc itself, by ``mallinfo2``, whether a 16 MB block is served by
-``mmap`` (default thresholds: it is) or from the heap (tuned: 32 MB threshold).
+Each check runs in a fresh interpreter (``GLIBC_TUNABLES`` is read when a
+process starts) and asks glibc itself, by ``mallinfo2``, whether a 16 MB block
+is served by ``mmap`` (default thresholds: it is) or from the heap (tuned: 32 MB
+threshold).
 Python's and numpy's imports free no block that large, so glibc's own rising
 threshold does not blur the difference (the first test holds that premise).
 """
@@ -14,11 +15,12 @@ import sys
 
 import pytest
 
-from imu_square.allocator import MMAP_THRESHOLD_BYTES
+from imu_square.monitor import replay
+from imu_square.monitor.replay import ALLOCATOR_TUNABLES
 
 pytestmark = pytest.mark.skipif(
     not (hasattr(os, "confstr") and os.confstr("CS_GNU_LIBC_VERSION")),
-    reason="mallopt thresholds are glibc's; this C library is another",
+    reason="GLIBC_TUNABLES is glibc's; this C library is another",
 )
 
 PROBE = r"""
@@ -49,7 +51,8 @@ print(json.dumps({"applied": applied, "mmap": mapped_by_mmap(16 * 1024 * 1024)})
 
 
 def _probe(call, env=None):
-    full_env = dict(os.environ, **(env or {}))
+    full_env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+    full_env.update(env or {})
     out = subprocess.run(
         [sys.executable, "-c", PROBE, call],
         capture_output=True,
@@ -66,58 +69,42 @@ def test_glibcs_defaults_serve_16_mb_by_mmap():
     assert _probe("applied = None")["mmap"] is True
 
 
-def test_tune_allocator_serves_blocks_below_32_mb_from_the_heap():
-    assert MMAP_THRESHOLD_BYTES == 32 * 1024 * 1024
-    probe = _probe("from imu_square.allocator import tune_allocator; applied = tune_allocator()")
+def test_the_tunables_serve_blocks_below_32_mb_from_the_heap():
+    assert "glibc.malloc.mmap_threshold=33554432" in ALLOCATOR_TUNABLES
+    probe = _probe("applied = True", {"GLIBC_TUNABLES": ALLOCATOR_TUNABLES})
     assert probe == {"applied": True, "mmap": False}
 
 
-def test_the_environment_can_keep_glibcs_defaults():
-    call = "from imu_square.allocator import tune_allocator; applied = tune_allocator()"
-    probe = _probe(call, {"IMU_SQUARE_MALLOC_TUNING": "0"})
-    assert probe == {"applied": False, "mmap": True}
+def test_replay_worker_processes_start_with_the_tunables(monkeypatch):
+    monkeypatch.delenv("GLIBC_TUNABLES", raising=False)
+    with replay._process_pool(1, frozenset()) as pool:
+        with replay._tuned_allocator_for_children():
+            seen = pool.submit(os.getenv, "GLIBC_TUNABLES")
+        assert "GLIBC_TUNABLES" not in os.environ  # this process's environment given back
+    assert seen.result() == ALLOCATOR_TUNABLES
 
 
-@pytest.mark.parametrize("value", ["off", "False", " no "])
-def test_the_environment_says_off_in_words_too(value):
-    # "off" and "false" tuned the allocator: only "0" was read as off
-    call = "from imu_square.allocator import tune_allocator; applied = tune_allocator()"
-    assert _probe(call, {"IMU_SQUARE_MALLOC_TUNING": value}) == {"applied": False, "mmap": True}
-
-
-def test_an_unreadable_setting_keeps_glibcs_defaults_and_says_so(tmp_path):
-    call = "from imu_square.allocator import tune_allocator; applied = tune_allocator()"
-    assert _probe(call, {"IMU_SQUARE_MALLOC_TUNING": "maybe"}) == {"applied": False, "mmap": True}
-    # the analyze command, which tunes, says why it did not
-    run = "import sys; from imu_square.cli import main; sys.exit(main(sys.argv[1:]))"
-    out = subprocess.run(
-        [sys.executable, "-c", run, "analyze", str(tmp_path / "none.mcap")],
-        capture_output=True,
-        text=True,
-        env=dict(os.environ, IMU_SQUARE_MALLOC_TUNING="maybe"),
-        timeout=60,
-    )
-    assert out.returncode == 2
-    assert "IMU_SQUARE_MALLOC_TUNING must be 0 or 1, got 'maybe'" in out.stderr
-
-
-def test_replay_worker_processes_are_tuned_on_start():
-    call = "from imu_square.monitor import replay; replay._init_worker(frozenset()); applied = 1"
-    assert _probe(call)["mmap"] is False
-
-
-def test_dask_tasks_are_tuned_before_the_file(tmp_path):
-    # the task replays a missing file (a failed outcome): the allocator is tuned all the same
-    call = (
-        "from imu_square.monitor import replay\n"
-        f"out = replay._replay_on_dask_worker({str(tmp_path / 'none.mcap')!r}, "
-        "replay.ReplayJob('m1'), frozenset())\n"
-        "assert out.status == 'failed', out\n"
-        "applied = 1"
-    )
-    assert _probe(call)["mmap"] is False
+def test_a_users_own_tunables_win(monkeypatch):
+    monkeypatch.setenv("GLIBC_TUNABLES", "")
+    with replay._process_pool(1, frozenset()) as pool:
+        with replay._tuned_allocator_for_children():
+            seen = pool.submit(os.getenv, "GLIBC_TUNABLES")
+    assert seen.result() == ""
 
 
 def test_importing_the_package_leaves_the_allocator_alone():
     call = "import imu_square.pipeline.squareness, imu_square.monitor.replay; applied = 0"
     assert _probe(call)["mmap"] is True
+
+
+def test_a_local_dask_clusters_workers_start_with_the_tunables(monkeypatch):
+    distributed = pytest.importorskip("distributed")
+    monkeypatch.delenv("GLIBC_TUNABLES", raising=False)
+    cluster = replay._local_cluster(1)
+    try:
+        with distributed.Client(cluster) as client:
+            seen = list(client.run(os.getenv, "GLIBC_TUNABLES").values())
+    finally:
+        cluster.close()
+    assert seen == [ALLOCATOR_TUNABLES]
+    assert "GLIBC_TUNABLES" not in os.environ

@@ -6,12 +6,12 @@ from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from numpy.testing import assert_array_equal
 
 from imu_square.errors import RecordingError
+from imu_square.io.cdr import _FIXED_BYTES as FIXED_BYTES
 from imu_square.io.cdr import (
     ACCEL_BATCH_SCHEMA,
     ACCEL_BATCH_SCHEMA_NAME,
     VECTOR3_STAMPED_SCHEMA,
     VECTOR3_STAMPED_SCHEMA_NAME,
-    accel_batch_size,
     decode_accel_batches,
     encode_accel_batch,
     encode_vector3_stamped,
@@ -28,6 +28,24 @@ CASES = [
     (100, False, False, 2**31 + 3, 10**9),
     (401, True, True, 99, -(2**62)),
 ]
+
+
+def accel_batch_size(n, has_temperature, has_offsets):
+    """Bytes of an encoded AccelBatch.
+
+    Parameters
+    ----------
+    n : int
+        Samples in the batch.
+    has_temperature, has_offsets : bool
+        Whether the temperature and time-offset arrays are filled.
+
+    Returns
+    -------
+    int
+        Message size. [bytes]
+    """
+    return FIXED_BYTES + 4 * n * (3 + bool(has_temperature) + bool(has_offsets))
 
 
 def _batch(n, temp, offs, seed):

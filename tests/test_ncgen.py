@@ -9,13 +9,13 @@ import sys
 from pathlib import Path
 
 import pytest
+from gcode_check import RADIUS_TOLERANCE_MM, parse_nc
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from imu_square.cli import main
 from imu_square.errors import ProgramError
 from imu_square.program import TestProgram, program_from_mapping
-from imu_square.program.gcode_check import RADIUS_TOLERANCE_MM, parse_nc
 from imu_square.program.ncgen import (
     DEFAULT_APPROACH_MM,
     DIALECTS,

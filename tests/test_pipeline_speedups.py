@@ -1,7 +1,7 @@
 """The pipeline's fast paths give the numbers of the library calls they replace.
 
-Each fast path (medians and quantiles by one partial sort, the phase fit by
-normal equations, ...) is held against the numpy/scipy call it replaces, and
+Each fast path (the phase fit by normal equations, in-place steps, Newton's
+solver, ...) is held against the numpy/scipy call it replaces, and
 the whole analysis is run twice, once with every fast path swapped back for
 its reference, on several recordings: different seeds and effects, gaps, no
 block markers, a fast circle. The two must agree to round-off: 1e-3 of the
@@ -22,13 +22,11 @@ from scipy import signal
 from imu_square.pipeline import (
     align,
     newton,
-    order_stats,
     per_cycle,
     quality,
     segment,
     squareness,
     stage2,
-    trig,
 )
 from imu_square.pipeline import filter as filter_module
 from imu_square.pipeline import noise_floor as noise
@@ -42,48 +40,10 @@ SHORT = TestProgram(cycles_per_direction=4, dwell_s=1.0)
 OPTIONS = AnalysisOptions(cutoff_hz=4.0, bootstrap_n=50)
 
 floats = st.floats(-1e6, 1e6, allow_nan=False, width=64)
-values = arrays(np.float64, st.integers(1, 60), elements=floats) | arrays(
-    np.float64, st.integers(1, 60), elements=st.sampled_from([0.0, 1.0, -2.5, np.nan])
-)
 
 
 def _same(a, b):
     return (math.isnan(a) and math.isnan(b)) or a == b
-
-
-@given(values)
-def test_median_is_numpys_bit_for_bit(a):
-    assert _same(order_stats.median(a), float(np.median(a)))
-
-
-def test_median_of_nothing_is_nan_as_numpys():
-    with pytest.warns(RuntimeWarning):
-        expected = np.median(np.array([]))
-    assert math.isnan(expected) and math.isnan(order_stats.median(np.array([])))
-
-
-@given(arrays(np.float64, st.tuples(st.integers(1, 40), st.integers(1, 3)), elements=floats))
-def test_column_medians_are_numpys_bit_for_bit(a):
-    np.testing.assert_array_equal(order_stats.column_medians(a), np.median(a, axis=0))
-
-
-rows = arrays(np.float64, st.tuples(st.integers(1, 5), st.integers(1, 40)), elements=floats) | (
-    arrays(
-        np.float64,
-        st.tuples(st.integers(1, 5), st.integers(1, 40)),
-        elements=st.sampled_from([0.0, 1.0, -2.5, np.nan]),
-    )
-)
-
-
-@given(rows)
-def test_row_medians_are_numpys_bit_for_bit(a):
-    np.testing.assert_array_equal(order_stats.row_medians(a), np.median(a, axis=-1))
-
-
-@given(values, st.floats(0.0, 1.0))
-def test_quantile_is_numpys_bit_for_bit(a, q):
-    assert _same(order_stats.quantile(a, q), float(np.quantile(a, q)))
 
 
 @given(arrays(np.float64, st.integers(1, 50), elements=st.floats(-20, 20)), st.floats(1.0, 6.0))
@@ -144,14 +104,10 @@ def test_phase_fit_matches_lstsq(omega, periods, ellipse, noise, gap, seed):
     assert fast == pytest.approx(ref, rel=1e-9, abs=1e-12)
 
 
-def _numpy_cos_sin(x):
-    return np.cos(x), np.sin(x)
-
-
-def _phase_slope_basis_reference(u, dev, omega, cos_sin=_numpy_cos_sin):
+def _phase_slope_basis_reference(u, dev, omega):
     """segment._phase_slope's normal equations with the basis stacked from temporaries."""
     half = max(abs(u[0]), abs(u[-1]), np.finfo(float).tiny)
-    c, s = cos_sin(omega * u)
+    c, s = np.cos(omega * u), np.sin(omega * u)
     basis = np.stack([np.ones_like(u), u / half, c, s, c * c - s * s, 2 * c * s])
     return float(np.linalg.solve(basis @ basis.T, basis @ dev)[1] / half)
 
@@ -168,39 +124,9 @@ def test_phase_slope_basis_in_place_is_bit_for_bit(omega, periods, seed):
     u -= 0.5 * u[-1]
     dev = 0.01 * u + 0.02 * np.sin(2 * omega * u) + 0.1 * rng.standard_normal(u.size)
     fast = segment._phase_slope(u, dev, omega)
-    assert fast == _phase_slope_basis_reference(u, dev, omega, trig.cos_sin)
-    # with numpy's cosine and sine (a few ulps away): the same slope to 1e-12 of the
+    # the basis written in place gives the stacked temporaries' slope, to 1e-12 of the
     # 0.01 rad/s put in, a billionth of what 0.1 rad of noise lets the fit tell
     assert fast == pytest.approx(_phase_slope_basis_reference(u, dev, omega), abs=1e-14)
-
-
-@settings(max_examples=200, deadline=None)
-@given(
-    arrays(
-        np.float64,
-        st.integers(1, 3000),
-        elements=st.floats(-1e4, 1e4) | st.sampled_from([0.0, -0.0, np.pi, -np.pi / 2]),
-    )
-)
-def test_cos_sin_is_numpys_to_a_few_ulps(x):
-    # an ulp of each table entry and of the sums, and an ulp of fl(2 pi) per whole turn
-    c, s = trig.cos_sin(x)
-    bound = 1e-15 + 2.5e-16 * np.abs(x) / (2 * np.pi)
-    assert np.all(np.abs(c - np.cos(x)) <= bound)
-    assert np.all(np.abs(s - np.sin(x)) <= bound)
-    c2, s2 = np.empty_like(x), np.empty_like(x)
-    out = trig.cos_sin(x, out=(c2, s2))
-    assert out[0] is c2 and out[1] is s2
-    np.testing.assert_array_equal(c2, c)
-    np.testing.assert_array_equal(s2, s)
-
-
-def test_cos_sin_is_at_most_three_ulps_off_over_a_run_of_phases():
-    # a 200 s run's phases, reduced to [0, 2 pi) as the noise model does
-    x = np.random.default_rng(0).uniform(0.0, 2 * np.pi, 200_000)
-    c, s = trig.cos_sin(x)
-    assert np.max(np.abs(c - np.cos(x))) <= 3 * np.finfo(float).eps
-    assert np.max(np.abs(s - np.sin(x))) <= 3 * np.finfo(float).eps
 
 
 def _tukey_weights_reference(norm, z):
@@ -363,10 +289,6 @@ def test_model_residual_is_the_reference_to_round_off(name, monkeypatch):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
-def _numpy_cos_sin_into(x, out):
-    return np.cos(x, out=out[0]), np.sin(x, out=out[1])
-
-
 def _white_density_reference(residuals, sample_rate_hz):
     """noise.white_density before (commit e1a42b2), with numpy's medians."""
     r = np.concatenate(residuals, axis=0)
@@ -389,14 +311,6 @@ def test_white_density_in_place_is_bit_for_bit(name, monkeypatch):
         np.testing.assert_array_equal(a, b)
 
 
-@given(rows)
-def test_row_medians_overwriting_the_input_are_numpys_bit_for_bit(a):
-    expected = np.median(a, axis=-1)
-    mine = a.copy()
-    np.testing.assert_array_equal(order_stats.row_medians(mine, overwrite_input=True), expected)
-    np.testing.assert_array_equal(np.sort(mine, axis=-1), np.sort(a, axis=-1))  # reordered
-
-
 @pytest.fixture
 def reference_paths(monkeypatch):
     """Swap every fast path for the library call it replaces."""
@@ -409,17 +323,10 @@ def reference_paths(monkeypatch):
         monkeypatch.setattr(noise, "_periodogram_sum", _periodogram_sum_reference)
         monkeypatch.setattr(noise, "model_residual", _model_residual_reference)
         monkeypatch.setattr(filter_module, "lowpass", _lowpass_reference)
-        monkeypatch.setattr(segment, "median", lambda a: float(np.median(a)))
-        monkeypatch.setattr(segment, "column_medians", lambda a: np.median(a, axis=0))
-        monkeypatch.setattr(segment, "cos_sin", _numpy_cos_sin_into)
         monkeypatch.setattr(
             segment, "_minus_row", lambda a, r, out=None: np.subtract(a, r, out=out)
         )
         monkeypatch.setattr(noise, "white_density", _white_density_reference)
-        monkeypatch.setattr(segment, "quantile", lambda a, q: float(np.quantile(a, q)))
-        monkeypatch.setattr(
-            fit, "row_medians", lambda a, overwrite_input=False: np.median(a, axis=-1)
-        )
         psi_and_deriv = lambda m, z, overwrite=False: (m.psi(z), m.psi_deriv(z))  # noqa: E731
         monkeypatch.setattr(fit, "_psi_and_deriv", psi_and_deriv)
         monkeypatch.setattr(newton, "_psi_and_deriv", psi_and_deriv)
@@ -557,13 +464,13 @@ def _rotation_with_temporaries(t, rel, period):
         return a - (2 * np.pi) * np.rint(a / (2 * np.pi))
 
     angle = np.arctan2(rel[:, 1], rel[:, 0])
-    lag = max(1, round(period / 8 / order_stats.median(np.diff(t))))
+    lag = max(1, round(period / 8 / np.median(np.diff(t))))
     if angle.size <= lag + 2:
         return 0.0, 1.0
-    omega0 = order_stats.median(wrap(angle[lag:] - angle[:-lag]) / (t[lag:] - t[:-lag]))
+    omega0 = np.median(wrap(angle[lag:] - angle[:-lag]) / (t[lag:] - t[:-lag]))
     u = t - 0.5 * (t[0] + t[-1])
     resid = wrap(angle - omega0 * u)
-    dev = wrap(resid - order_stats.median(resid))
+    dev = wrap(resid - np.median(resid))
     good = np.abs(dev) < segment._MAX_PHASE_DEVIATION
     if np.count_nonzero(good) < 3:
         return omega0, 1.0
@@ -585,23 +492,6 @@ def test_rotation_in_place_is_bit_for_bit(omega, periods, noise, seed):
     rel = np.column_stack([np.cos(phi), np.sin(phi)]) + noise * rng.standard_normal((t.size, 2))
     period = 2 * np.pi / abs(omega)
     assert segment._rotation(t, rel, period) == _rotation_with_temporaries(t, rel, period)
-
-
-@pytest.mark.parametrize("seed", range(8))
-def test_table_cosine_changes_nothing_the_data_can_tell(seed, monkeypatch):
-    # trig.cos_sin (a few ulps off numpy's) in the phase fit and the noise model, against
-    # numpy's cosine and sine, over seeds: a billionth of the Cramer-Rao bound at most
-    sensor = SensorModel(noise_density_m_s2_rthz=100 * UG, flicker_corner_hz=0.5, eps_c_rad=0.1)
-    rec = simulate_run(SHORT, *with_effects(["servo_mismatch"], sensor=sensor), seed=100 + seed)[0]
-    fast = analyze(rec, OPTIONS)
-    monkeypatch.setattr(segment, "cos_sin", _numpy_cos_sin_into)
-    monkeypatch.setattr(noise, "cos_sin", _numpy_cos_sin_into)
-    ref = analyze(rec, OPTIONS)
-    assert abs(fast.squareness_rad - ref.squareness_rad) < 1e-9 * ref.crb_rad
-    assert abs(fast.eps_c_rad - ref.eps_c_rad) < 1e-9 * ref.u_eps_c_rad
-    assert fast.u_squareness_rad == pytest.approx(ref.u_squareness_rad, rel=1e-9)
-    assert fast.crb_rad == pytest.approx(ref.crb_rad, rel=1e-9)
-    assert fast.period_s == pytest.approx(ref.period_s, rel=1e-13)
 
 
 @given(

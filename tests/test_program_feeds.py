@@ -5,11 +5,11 @@ import math
 
 import numpy as np
 import pytest
+from gcode_check import parse_nc
 
 from imu_square.cli import main
 from imu_square.errors import ProgramError
 from imu_square.program import parse_program, program_from_mapping
-from imu_square.program.gcode_check import parse_nc
 from imu_square.program.ncgen import DIALECTS, generate_nc
 from imu_square.simulate import MachineModel, SensorModel, simulate_run
 from imu_square.simulate.truth import gravity_coupling_rad_per_m

@@ -17,11 +17,39 @@ from imu_square.simulate import simulate_run
 from imu_square.simulate.kinematics import servo_response
 from imu_square.simulate.machine import MachineModel
 from imu_square.simulate.sensor import SensorModel
-from imu_square.simulate.truth import servo_amplitude_phase
 
 HIGH = TestProgram(radius_m=0.025, feed_m_per_s=0.4, cycles_per_direction=6, dwell_s=0.5)
 EPS = math.radians(1.15)
 TAUS = (1.5e-3, 2.1e-3)
+
+
+def servo_amplitude_phase(omega_rad_s, tau_x_s, tau_y_s, eps_c_rad, model="first_order"):
+    """Apparent ``theta_y - theta_x`` from the servos' amplitude mismatch alone.
+
+    Axis amplitudes ``g_x``, ``g_y`` seen through sensor axes turned by ``eps_c``:
+    ``tan theta_x = (g_y / g_x) tan eps_c`` and ``tan theta_y = (g_x / g_y) tan eps_c``,
+    so ``theta_y - theta_x ~ (g_x - g_y) sin(2 eps_c)``, the same in both directions.
+
+    Parameters
+    ----------
+    omega_rad_s : float
+        Angular speed of the circle. [rad/s]
+    tau_x_s, tau_y_s : float
+        Servo time constants. [s]
+    eps_c_rad : float
+        Sensor rotation about Z. [rad]
+    model : {"pure_lag", "first_order"}
+        Servo model (:mod:`imu_square.simulate.kinematics`).
+
+    Returns
+    -------
+    float
+        [rad]
+    """
+    gx = servo_response(omega_rad_s, tau_x_s, model)[0]
+    gy = servo_response(omega_rad_s, tau_y_s, model)[0]
+    t = math.tan(eps_c_rad)
+    return math.atan2(gx * t, gy) - math.atan2(gy * t, gx)
 
 
 def test_first_order_response_shrinks_and_delays():

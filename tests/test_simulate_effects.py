@@ -25,13 +25,57 @@ from imu_square.simulate.effects import (
     SHAPE,
     SIZE,
     effect_parameters,
-    effect_values,
     with_effect_values,
 )
 from imu_square.simulate.machine import machine_from_mapping
 from imu_square.simulate.sensor import sensor_from_mapping
-from imu_square.simulate.signal import model_timeline, sensed_signal
+from imu_square.simulate.signal import axis_motion, model_timeline, sense_motion
 from imu_square.simulate.writer import machine_to_toml, sensor_to_toml, write_model_files
+
+
+def effect_values(name, machine, sensor):
+    """An effect's parameters on a machine and sensor, in display units (as the tests read them).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`EFFECTS`.
+    machine : MachineModel
+    sensor : SensorModel
+
+    Returns
+    -------
+    dict of str to float
+        By parameter name (flags as 0.0 or 1.0).
+    """
+    return {p.name: p.get(machine, sensor) / p.scale for p in effect_parameters(name)}
+
+
+def sensed_signal(timeline, machine, sensor, t_s, power_on_s=0.0):
+    """Noise-free specific force in the sensor frame at true times ``t_s``.
+
+    Parameters
+    ----------
+    timeline : Timeline
+        The commanded path (:func:`model_timeline`).
+    machine : MachineModel
+        The machine.
+    sensor : SensorModel
+        The sensor; its noise, ADC steps and clipping are not applied.
+    t_s : ndarray, shape (n,)
+        True times on the timeline, increasing. [s]
+    power_on_s : float
+        The sensor's time since power-on at ``t = 0`` (its warm-up). [s]
+
+    Returns
+    -------
+    ndarray, shape (n, 3)
+        Specific force along the sensor's x, y, z after gain and bias. [m/s^2]
+    """
+    t_s = np.asarray(t_s, dtype=np.float64)
+    paths = [axis_motion(timeline, machine, t_s, axis) for axis in (0, 1)]
+    pos, _, acc = machine.geometry.apply(paths[0], paths[1], t_s)
+    return sense_motion(machine, sensor, pos, acc, t_s, power_on_s)
 
 
 def test_every_effect_declares_its_parameters():

@@ -149,9 +149,6 @@ def _record(
 
 def run(args):
     """The monitor's night with --config or --demo; otherwise record and analyse one run."""
-    from imu_square.allocator import tune_allocator
-
-    tune_allocator()  # this process analyses the night's file (imu_square.allocator)
     if args.demo:
         return run_demo(args)
     if args.config:

@@ -56,7 +56,6 @@ def register(sub):
 
 def run(args):
     """Analyse each recording; return 2 if any could not be analysed."""
-    from imu_square.allocator import tune_allocator
     from imu_square.errors import AnalysisError
     from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.convergence import convergence
@@ -64,7 +63,6 @@ def run(args):
     from imu_square.program import read_program
     from imu_square.units import SQUARENESS_UNIT, URAD
 
-    tune_allocator()  # this process analyses files: keep freed memory for the next array
     options = AnalysisOptions(
         cutoff_hz=args.cutoff_hz,
         order=args.order,

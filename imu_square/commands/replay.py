@@ -99,7 +99,6 @@ def run(args):
     """Replay the files, store them as they come, judge the history, summarise."""
     from dataclasses import replace
 
-    from imu_square.allocator import tune_allocator
     from imu_square.monitor.config import read_monitor
     from imu_square.monitor.history.store import open_history
     from imu_square.monitor.replay import (
@@ -111,7 +110,6 @@ def run(args):
         store_outcome,
     )
 
-    tune_allocator()  # --jobs 1 analyses in this process (imu_square.allocator)
     config = read_monitor(args.config)
     if args.jobs is not None and args.jobs < 1:
         raise ImuSquareError(f"--jobs must be a whole number >= 1, got {args.jobs}")

@@ -85,8 +85,6 @@ class Layout:
         Cycle ``c`` holds analysed samples ``cycle_edges[c]:cycle_edges[c + 1]``.
     cycle_block : ndarray of int, shape (n_cycles,)
         Position in :attr:`blocks` of each cycle.
-    cycle_t_s : ndarray, shape (n_cycles,)
-        Middle of each cycle. [s]
     cycle_t0_s : ndarray, shape (n_cycles,)
         Exact start of each cycle (a whole period from the anchor). [s]
     period_s : float
@@ -111,7 +109,6 @@ class Layout:
     sample_block: np.ndarray
     cycle_edges: np.ndarray
     cycle_block: np.ndarray
-    cycle_t_s: np.ndarray
     cycle_t0_s: np.ndarray
     period_s: float
     reversal_bin: np.ndarray
@@ -127,16 +124,6 @@ class Layout:
     def frequency_hz(self):
         """Circle frequency of the time-to-angle map. [Hz]"""
         return self.omega_rad_s / (2 * math.pi)
-
-    def block_samples(self, b):
-        """Slice of the analysed samples that belong to block position ``b``."""
-        lo, hi = np.searchsorted(self.sample_block, (b, b + 1))
-        return slice(int(lo), int(hi))
-
-    def cycles_of(self, direction):
-        """Cycle numbers of one direction's blocks."""
-        signs = np.array([self.blocks[b].sign for b in self.cycle_block])
-        return np.flatnonzero(signs == (1 if direction == "ccw" else -1))
 
 
 def _reversal_bins(t, phi, sample_block, blocks, omega, dt):
@@ -181,7 +168,6 @@ def _assemble(program, blocks, omega, dt, t_all, cycles, dropped):
     for b, block in enumerate(blocks):
         sel = sample_block == b
         phi[sel] = block.phi_mid_rad + block.sign * omega * (t[sel] - block.t_mid_s)
-    mids = np.array([0.5 * (t[edges[c]] + t[edges[c + 1] - 1]) for c in range(len(cycles))])
     bins, n_bins = _reversal_bins(t, phi, sample_block, blocks, omega, dt)
     return Layout(
         program=program,
@@ -194,7 +180,6 @@ def _assemble(program, blocks, omega, dt, t_all, cycles, dropped):
         sample_block=sample_block,
         cycle_edges=edges,
         cycle_block=cycle_block,
-        cycle_t_s=mids,
         cycle_t0_s=np.array([c[3] for c in cycles], dtype=np.float64),
         period_s=2 * math.pi / omega,
         reversal_bin=bins,

@@ -78,24 +78,6 @@ _FIXED_BYTES = 40
 _INT32_MAX = 2**31 - 1
 
 
-def accel_batch_size(n, has_temperature, has_offsets):
-    """Bytes of an encoded AccelBatch.
-
-    Parameters
-    ----------
-    n : int
-        Samples in the batch.
-    has_temperature, has_offsets : bool
-        Whether the temperature and time-offset arrays are filled.
-
-    Returns
-    -------
-    int
-        Message size. [bytes]
-    """
-    return _FIXED_BYTES + 4 * n * (3 + bool(has_temperature) + bool(has_offsets))
-
-
 def encode_accel_batch(seq0, dt_ns, t0_ns, accel, temperature_c=None, t_offset_ns=None):
     """Encode one AccelBatch message.
 

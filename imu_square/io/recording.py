@@ -20,17 +20,6 @@ from imu_square.errors import RecordingError
 
 AXES = ("x", "y", "z")
 
-EVENT_KINDS = (
-    "block_start",  # CNC marker or simulator: a CCW/CW block starts moving
-    "block_end",
-    "gap",  # samples lost: detail lost=N[,lost_s=T][,cause=...] (cause: a run's missing end)
-    "crc_error",
-    "reconnect",
-    "run_start",
-    "run_end",
-    "marker",  # any other marker line from the device or the CNC
-)
-
 
 @dataclass(frozen=True)
 class Event:
@@ -41,7 +30,11 @@ class Event:
     time_ns : int
         When, on the recording's clock. [ns]
     kind : str
-        One of :data:`EVENT_KINDS`.
+        ``"block_start"`` (a CNC marker or the simulator: a CCW/CW block starts
+        moving), ``"block_end"``, ``"gap"`` (samples lost: detail
+        ``lost=N[,lost_s=T][,cause=...]``, the cause of a run's missing end),
+        ``"crc_error"``, ``"reconnect"``, ``"run_start"``, ``"run_end"`` or
+        ``"marker"`` (any other marker line from the device or the CNC).
     direction : str
         ``"ccw"``, ``"cw"`` or ``""`` when not about a block.
     block : int

@@ -14,6 +14,7 @@ history in recording-time order (:func:`~.night.judge_history`), so they do
 not depend on the order the files finished in, nor on the number of workers.
 """
 
+import contextlib
 import glob
 import hashlib
 import os
@@ -21,13 +22,20 @@ import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-from imu_square.allocator import tune_allocator
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import AnalysisSettings
 from imu_square.monitor.history.encoding import first_line
 from imu_square.monitor.history.rows import RunRow
 
 STATUSES = ("analysed", "invalid", "skipped", "failed")
+
+# glibc's malloc told to keep freed memory for reuse in the worker processes, which only
+# analyse files: each file makes hundreds of temporary arrays of 0.1-5 MB, which glibc
+# would map and unmap afresh (above its mmap threshold) and trim off the heap, paying
+# the page faults again for the next array: a fifth of the per-file time
+# (benchmarks/per_file.py --trick allocator). A worker then holds up to 128 MB of freed
+# memory more. Read by glibc when a process starts; other C libraries ignore it.
+ALLOCATOR_TUNABLES = "glibc.malloc.mmap_threshold=33554432:glibc.malloc.trim_threshold=134217728"
 
 
 class ReplayError(ImuSquareError):
@@ -198,17 +206,10 @@ _KNOWN = frozenset()
 def _init_worker(known):
     global _KNOWN
     _KNOWN = known
-    tune_allocator()  # a process of ours that only analyses files (imu_square.allocator)
 
 
 def _replay_with_known(path, job):
     return replay_file(path, job, _KNOWN)
-
-
-def _replay_on_dask_worker(path, job, known):
-    """:func:`replay_file` in a Dask worker, its allocator tuned first (once per process)."""
-    tune_allocator()
-    return replay_file(path, job, known)
 
 
 def run_local(paths, job, known=frozenset(), jobs=None):
@@ -223,7 +224,9 @@ def run_local(paths, job, known=frozenset(), jobs=None):
     known : set of str
         Hashes to skip.
     jobs : int, optional
-        Worker processes; one per core if None. 1 runs in this process.
+        Worker processes; one per core if None. 1 runs in this process. The
+        workers start with :data:`ALLOCATOR_TUNABLES` unless the environment
+        sets ``GLIBC_TUNABLES`` itself.
 
     Yields
     ------
@@ -234,14 +237,11 @@ def run_local(paths, job, known=frozenset(), jobs=None):
         for path in paths:
             yield replay_file(path, job, known)
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(
-        max_workers=jobs, mp_context=context, initializer=_init_worker, initargs=(known,)
-    ) as pool:
-        futures = [pool.submit(_replay_with_known, p, job) for p in paths]
+    with _process_pool(jobs, known) as pool:
+        with _tuned_allocator_for_children():  # the pool starts its workers as tasks come
+            futures = [pool.submit(_replay_with_known, p, job) for p in paths]
         try:
             for future in as_completed(futures):
                 yield future.result()
@@ -249,6 +249,39 @@ def run_local(paths, job, known=frozenset(), jobs=None):
             for future in futures:
                 future.cancel()
             raise
+
+
+def _process_pool(jobs, known):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context("spawn")  # a fresh interpreter: reads the environment
+    return ProcessPoolExecutor(
+        max_workers=jobs, mp_context=context, initializer=_init_worker, initargs=(known,)
+    )
+
+
+@contextlib.contextmanager
+def _tuned_allocator_for_children():
+    """:data:`ALLOCATOR_TUNABLES` in the environment of the processes started meanwhile."""
+    if "GLIBC_TUNABLES" in os.environ:  # the user's own setting (even empty) wins
+        yield
+        return
+    os.environ["GLIBC_TUNABLES"] = ALLOCATOR_TUNABLES
+    try:
+        yield
+    finally:
+        del os.environ["GLIBC_TUNABLES"]
+
+
+def _local_cluster(workers):
+    """A ``distributed.LocalCluster`` whose workers start with :data:`ALLOCATOR_TUNABLES`."""
+    from distributed import LocalCluster
+
+    with _tuned_allocator_for_children():  # started before it returns
+        return LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+        )
 
 
 def run_dask(paths, job, known=frozenset(), scheduler=None, workers=2):
@@ -263,8 +296,9 @@ def run_dask(paths, job, known=frozenset(), scheduler=None, workers=2):
     known : set of str
         Hashes to skip (scattered to the workers once).
     scheduler : str, optional
-        ``tcp://HOST:PORT`` of a running scheduler; None starts a
-        ``distributed.LocalCluster`` of ``workers`` processes.
+        ``tcp://HOST:PORT`` of a running scheduler, whose workers' environment
+        is the cluster's own; None starts a ``distributed.LocalCluster`` of
+        ``workers`` processes, with :data:`ALLOCATOR_TUNABLES`.
     workers : int
         Worker processes of the local cluster.
 
@@ -273,22 +307,20 @@ def run_dask(paths, job, known=frozenset(), scheduler=None, workers=2):
     FileOutcome
     """
     try:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import Client, as_completed
     except ImportError:
         raise ReplayError(
             "a Dask replay needs dask and distributed: pip install 'imu-square[cluster]'"
         ) from None
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
-        )
+        cluster = _local_cluster(workers)
     try:
         with Client(scheduler or cluster) as client:
             # a list of one each: scatter sends a collection's items, not the collection
             known_future, job_future = client.scatter([known, job], broadcast=True)
             futures = client.map(
-                _replay_on_dask_worker,
+                replay_file,
                 list(paths),
                 job=job_future,
                 known=known_future,

@@ -25,10 +25,9 @@ standard errors the night is corrected to the baseline runs' mean temperature
 before its change is taken, and the slope's uncertainty enters the change's.
 A night whose sensor warmed by more than :data:`WARMING_RISE_C` during the run,
 or faster than :data:`WARMING_RATE_C_PER_MIN`, is not judged while that slope
-is not known. A regression *across* nights on
-the temperature (:func:`~.drift.fit_run_drift`)
-is reported but never used to correct: it cannot tell the sensor's drift from
-a machine change that follows the season. Without a temperature channel a
+is not known. Nights are never corrected by a regression *across* nights on
+the temperature: it could not tell the sensor's drift from a machine change
+that follows the season. Without a temperature channel a
 linear slope against the time since power-on cannot be carried from a cold
 night to a warm baseline: a night whose own within-night drift against it is
 significant (p < :data:`WARMING_P`), or one switched on sooner than any of the
@@ -154,9 +153,6 @@ class Assessment:
         Every run of the machine, in recording-time order.
     anchors : tuple of AnchorRow
         The baseline's anchors by reference methods.
-    run_drift : DriftFit or None
-        The across-night regression of the valid runs since (and of) the baseline on
-        their temperature or uptime: reported, never used to correct.
     """
 
     machine_id: str
@@ -164,7 +160,6 @@ class Assessment:
     design: object
     nights: tuple
     anchors: tuple = field(default=())
-    run_drift: object = None
 
     @property
     def latest(self):
@@ -333,7 +328,6 @@ def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
         design,
         tuple(nights[r.id] for r in runs),
         tuple(anchors),
-        _run_drift(runs, in_baseline, before),
     )
 
 
@@ -432,28 +426,6 @@ def _drift_corrections(runs, base_runs):
                 ),
             }
     return out
-
-
-def _run_drift(runs, in_baseline, before_ns):
-    """The across-night regression (reported only), or None when it cannot be fitted."""
-    from imu_square.errors import AnalysisError
-    from imu_square.monitor.stats.drift import fit_run_drift
-
-    used = [
-        r for r in runs if r.valid and (r.id in in_baseline or (r.recorded_at_ns or 0) >= before_ns)
-    ]
-    if used and all(r.temperature_mean_c is not None for r in used):
-        regressor, x = "temperature_c", [r.temperature_mean_c for r in used]
-    elif used and all(r.time_since_power_on_s is not None for r in used):
-        regressor, x = "time_since_power_on_s", [r.time_since_power_on_s for r in used]
-    else:
-        return None
-    try:
-        return fit_run_drift(
-            [r.squareness_rad for r in used], [r.u_squareness_rad for r in used], x, regressor
-        )
-    except AnalysisError:
-        return None
 
 
 def _earlier(row, evaluation):

@@ -39,8 +39,6 @@ from scipy import fft as sp_fft
 from scipy import linalg, signal
 
 from imu_square.pipeline.filter import design_lowpass
-from imu_square.pipeline.order_stats import row_medians
-from imu_square.pipeline.trig import cos_sin
 from imu_square.pipeline.uncertainty import cramer_rao
 
 _MAD_TO_SD = 1.4826
@@ -152,7 +150,8 @@ def model_residual(filtered, segmentation, cycles, mean_fit):
             np.floor(reduced, out=reduced)
             reduced *= turn
             np.subtract(phi, reduced, out=reduced)
-            c, s = cos_sin(reduced, out=(phi, np.empty_like(phi)))
+            s = np.sin(reduced)
+            c = np.cos(reduced, out=phi)
             rem = np.interp(reduced, table_phi, table_rem)
             # Residuals axis by axis into the rows of a (2, n) array, handed out as its
             # (n, 2) transpose: the noise spectrum takes the rows as they are.
@@ -219,9 +218,9 @@ def white_density(residuals, sample_rate_hz):
     # One contiguous row per axis, our own copy: partitioned and overwritten in place
     # (the medians need not the order; fresh arrays cost page faults).
     r = np.concatenate([x.T for x in residuals], axis=1)
-    r -= row_medians(r, overwrite_input=True)[:, None]
+    r -= np.median(r, axis=-1, overwrite_input=True)[:, None]
     np.abs(r, out=r)
-    sd = _MAD_TO_SD * row_medians(r, overwrite_input=True)
+    sd = _MAD_TO_SD * np.median(r, axis=-1, overwrite_input=True)
     return float(np.sqrt(np.mean(sd**2) / (sample_rate_hz / 2)))
 
 

@@ -29,8 +29,6 @@ from functools import cached_property
 import numpy as np
 
 from imu_square.errors import AnalysisError
-from imu_square.pipeline.order_stats import column_medians, median, quantile
-from imu_square.pipeline.trig import cos_sin
 
 # Motion intervals closer than this fraction of a period are one interval.
 _MERGE_PERIODS = 0.1
@@ -225,7 +223,7 @@ def _rotation(t, rel, period):
     # Phases as arctan2 once, their differences wrapped: the same as the angles of
     # z[lag:] conj(z[:-lag]) and of z exp(-i omega0 t) without complex arithmetic.
     angle = np.arctan2(rel[:, 1], rel[:, 0])
-    dt = median(np.diff(t))
+    dt = float(np.median(np.diff(t)))
     lag = max(1, round(period / 8 / dt))
     if angle.size <= lag + 2:
         return 0.0, 1.0
@@ -233,12 +231,12 @@ def _rotation(t, rel, period):
     # Each step in place on the previous temporary (fresh arrays cost page faults).
     rates = _wrap(angle[lag:] - angle[:-lag], inplace=True)
     rates /= t[lag:] - t[:-lag]
-    omega0 = median(rates)
+    omega0 = float(np.median(rates))
     tm = 0.5 * (t[0] + t[-1])
     u = t - tm
     resid = np.multiply(omega0, u)
     resid = _wrap(np.subtract(angle, resid, out=resid), inplace=True)
-    dev = _wrap(resid - median(resid), inplace=True)
+    dev = _wrap(resid - float(np.median(resid)), inplace=True)
     good = np.abs(dev) < _MAX_PHASE_DEVIATION
     n_good = np.count_nonzero(good)
     if n_good < 3:
@@ -269,7 +267,8 @@ def _phase_slope(u, dev, omega):
     np.divide(u, half, out=basis[1])
     c, s, c2, s2 = basis[2], basis[3], basis[4], basis[5]
     np.multiply(omega, u, out=c2)
-    cos_sin(c2, out=(c, s))  # to a few ulps of np.cos, np.sin; four times faster
+    np.cos(c2, out=c)
+    np.sin(c2, out=s)
     np.multiply(s, s, out=s2)
     np.multiply(c, c, out=c2)
     c2 -= s2
@@ -419,7 +418,7 @@ class Motion:
     @cached_property
     def sample_step_s(self):
         """Median step between samples, found once for all blocks. [s]"""
-        return median(np.diff(self.t_s))
+        return float(np.median(np.diff(self.t_s)))
 
     @cached_property
     def senses(self):
@@ -448,14 +447,14 @@ def find_motion(t_s, accel_xy, program):
     Motion
     """
     t_s = np.asarray(t_s, dtype=np.float64)
-    baseline = column_medians(accel_xy)
+    baseline = np.median(accel_xy, axis=0)
     rel = _minus_row(accel_xy, baseline)
     env = _magnitude(rel)
     plans = program.blocks()
     nominal = program.block_duration_s
     duration = t_s[-1] - t_s[0] if t_s.size > 1 else 0.0
     fraction = np.clip(len(plans) * nominal / max(duration, 1e-9), 0.02, 0.98)
-    level = quantile(env, 1 - fraction / 2)
+    level = float(np.quantile(env, 1 - fraction / 2))
     thr = 0.5 * level
     intervals = _motion_intervals(t_s, env, thr, program.period_s)
     rest = np.ones(t_s.size, dtype=bool)
@@ -464,7 +463,7 @@ def find_motion(t_s, accel_xy, program):
     if np.count_nonzero(rest) > _REST_PAD:
         # Re-centre on the rest level alone: the median over the whole recording
         # is pulled by the circles, which would make start and stop asymmetric.
-        baseline = column_medians(accel_xy[rest])
+        baseline = np.median(accel_xy[rest], axis=0)
         # Into the first pass's arrays: a fresh allocation costs more than the arithmetic.
         rel = _minus_row(accel_xy, baseline, out=rel)
         env = _magnitude(rel, out=env)
@@ -560,8 +559,8 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s
     half = 0.45 * program.cycles_per_direction * program.period_s
     sel = slice(np.searchsorted(t_s, mid - half), np.searchsorted(t_s, mid + half, side="right"))
     env_s = env[sel]
-    level_s = median(env_s)
-    spread = 1.4826 * median(np.abs(env_s - level_s)) / level_s
+    level_s = float(np.median(env_s))
+    spread = 1.4826 * float(np.median(np.abs(env_s - level_s))) / level_s
     if spread > _MAX_ENVELOPE_SPREAD:
         raise AnalysisError(
             f"block {plan.index} ({plan.direction}) is not a circle: the horizontal "

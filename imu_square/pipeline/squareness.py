@@ -34,6 +34,7 @@ import math
 
 import numpy as np
 
+from imu_square.blas import one_blas_thread
 from imu_square.errors import AnalysisError
 from imu_square.log import logger
 from imu_square.pipeline import quality as q
@@ -120,6 +121,7 @@ def trace_cycles(recording, data, seg, grid_points):
     return clipped, cyc
 
 
+@one_blas_thread()  # many small solves: BLAS threads only cost (imu_square.blas)
 def analyze(recording, options=None, program=None):
     """Squareness, sensor rotation and servo mismatch of one recording.
 

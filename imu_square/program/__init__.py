@@ -1,5 +1,4 @@
-"""The circle test program: its file (:mod:`.spec`), its NC code (:mod:`.ncgen`)
-and the strict parser that checks that code (:mod:`.gcode_check`)."""
+"""The circle test program: its file (:mod:`.spec`) and its NC code (:mod:`.ncgen`)."""
 
 from imu_square.program.spec import (
     DIRECTIONS,

@@ -32,7 +32,6 @@ References
 """
 
 from dataclasses import dataclass
-from itertools import product
 
 import numpy as np
 
@@ -40,10 +39,6 @@ from imu_square.errors import ImuSquareError
 from imu_square.validation import check_option
 
 _AXES = "XYZ"
-
-
-def _corner_points(ranges):
-    return np.array(list(product(*ranges)), dtype=float)
 
 
 def face_diagonals(x_range, y_range):

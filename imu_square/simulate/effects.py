@@ -16,10 +16,10 @@ parameters that switch it on and shape it, each with
 - ``observed_by``: an extra channel that observes the parameter directly
   (the temperature channel shows the sensor's warm-up time constant).
 
-:func:`effect_values` reads an effect's parameters off a machine and sensor,
-:func:`with_effect_values` writes them back. Code that fits or searches the
-vocabulary (``imu_square.discrepancy``) reads only this table, so a new
-effect joins it by declaring its parameters here.
+:func:`with_effect_values` sets an effect's parameters on a machine and
+sensor. Code that fits or searches the vocabulary (``imu_square.discrepancy``)
+reads only this table, so a new effect joins it by declaring its parameters
+here.
 """
 
 import math
@@ -460,24 +460,6 @@ def effect_parameters(name):
     if name not in EFFECT_PARAMETERS:
         raise ConfigError(f"effect {name!r} is not in the vocabulary {list(EFFECTS)}")
     return EFFECT_PARAMETERS[name]
-
-
-def effect_values(name, machine, sensor):
-    """An effect's parameters on a machine and sensor, in display units.
-
-    Parameters
-    ----------
-    name : str
-        One of :data:`EFFECTS`.
-    machine : MachineModel
-    sensor : SensorModel
-
-    Returns
-    -------
-    dict of str to float
-        By parameter name (flags as 0.0 or 1.0).
-    """
-    return {p.name: p.get(machine, sensor) / p.scale for p in effect_parameters(name)}
 
 
 def with_effect_values(name, machine, sensor, values):

@@ -13,11 +13,9 @@ so a caller can keep the ones that did not change:
 3. :func:`sense_motion`: gravity coupling, carriage yaw, the sensor's
    mounting, non-orthogonality, gain and bias.
 
-:func:`sensed_signal` runs all three; it equals ``simulate_run``'s reading
-before noise, ADC steps and clipping, sample for sample (a test checks).
+The three in a row equal ``simulate_run``'s reading before noise, ADC steps
+and clipping, sample for sample (``tests/test_simulate_effects.py`` checks).
 """
-
-import numpy as np
 
 from imu_square.simulate.drive import add_backlash, add_spikes, add_vibration
 from imu_square.simulate.kinematics import carriage_tilt
@@ -130,30 +128,3 @@ def sense_motion(machine, sensor, pos, acc, t_s, power_on_s=0.0):
     # without an associated yaw the carriage does not turn: a scalar spares the trigonometry
     yaw = g.carriage_yaw(pos[:, 0], pos[:, 1]) if g.yaw_x or g.yaw_y else 0.0
     return sensor.apply_gain(sensor.sense(acc, tilt, yaw, t_s + power_on_s))
-
-
-def sensed_signal(timeline, machine, sensor, t_s, power_on_s=0.0):
-    """Noise-free specific force in the sensor frame at true times ``t_s``.
-
-    Parameters
-    ----------
-    timeline : Timeline
-        The commanded path (:func:`model_timeline`).
-    machine : MachineModel
-        The machine.
-    sensor : SensorModel
-        The sensor; its noise, ADC steps and clipping are not applied.
-    t_s : ndarray, shape (n,)
-        True times on the timeline, increasing. [s]
-    power_on_s : float
-        The sensor's time since power-on at ``t = 0`` (its warm-up). [s]
-
-    Returns
-    -------
-    ndarray, shape (n, 3)
-        Specific force along the sensor's x, y, z after gain and bias. [m/s^2]
-    """
-    t_s = np.asarray(t_s, dtype=np.float64)
-    paths = [axis_motion(timeline, machine, t_s, axis) for axis in (0, 1)]
-    pos, _, acc = machine.geometry.apply(paths[0], paths[1], t_s)
-    return sense_motion(machine, sensor, pos, acc, t_s, power_on_s)

@@ -57,8 +57,9 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   between the overshoots), and ``feed``, the index of the block's feed;
 - ``reversal_times_s``: ``{"x": [...], "y": [...]}``, when each actual axis
   reverses (servo lag included), from the first sample;
-- the keys of :data:`LEGACY_KEYS`, written until the next release under their
-  old names.
+- ``alpha_rad``, ``beta_rad``, ``local_squareness_rad``,
+  ``expected_theta_diff_exact_rad`` and ``expected_theta_diff_rad``: an earlier
+  release's names, written until the next release.
 """
 
 import math
@@ -68,17 +69,6 @@ import numpy as np
 
 from imu_square.simulate.kinematics import servo_response
 from imu_square.units import G
-
-# Keys an earlier release wrote, each with the key that replaces it. They are
-# still written for one release; ``expected_theta_diff_rad`` was the first-order
-# form of ``expected_squareness_rad`` and keeps its old value.
-LEGACY_KEYS = {
-    "alpha_rad": "machine_squareness_rad",
-    "beta_rad": "sensor_squareness_rad",
-    "local_squareness_rad": "local_machine_squareness_rad",
-    "expected_theta_diff_exact_rad": "expected_squareness_rad",
-    "expected_theta_diff_rad": "expected_squareness_rad",
-}
 
 
 def _gravity_phases(program, machine):
@@ -96,35 +86,6 @@ def servo_gains(machine, omega_rad_s):
         servo_response(omega_rad_s, tau, machine.servo_model)[0]
         for tau in (machine.tau_x_s, machine.tau_y_s)
     )
-
-
-def servo_amplitude_phase(omega_rad_s, tau_x_s, tau_y_s, eps_c_rad, model="first_order"):
-    """Apparent ``theta_y - theta_x`` from the servos' amplitude mismatch alone.
-
-    Axis amplitudes ``g_x``, ``g_y`` seen through sensor axes turned by ``eps_c``:
-    ``tan theta_x = (g_y / g_x) tan eps_c`` and ``tan theta_y = (g_x / g_y) tan eps_c``,
-    so ``theta_y - theta_x ~ (g_x - g_y) sin(2 eps_c)``, the same in both directions.
-
-    Parameters
-    ----------
-    omega_rad_s : float
-        Angular speed of the circle. [rad/s]
-    tau_x_s, tau_y_s : float
-        Servo time constants. [s]
-    eps_c_rad : float
-        Sensor rotation about Z. [rad]
-    model : {"pure_lag", "first_order"}
-        Servo model (:mod:`imu_square.simulate.kinematics`).
-
-    Returns
-    -------
-    float
-        [rad]
-    """
-    gx = servo_response(omega_rad_s, tau_x_s, model)[0]
-    gy = servo_response(omega_rad_s, tau_y_s, model)[0]
-    t = math.tan(eps_c_rad)
-    return math.atan2(gx * t, gy) - math.atan2(gy * t, gx)
 
 
 def _exact_theta_diff(program, machine, alpha_beta_t, eps, harmonics, gains=(1.0, 1.0)):
@@ -316,7 +277,9 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         "program": program.to_mapping(),
         "blocks": blocks,
         "reversal_times_s": reversals,
-        # legacy keys (LEGACY_KEYS), for one release
+        # An earlier release's names, written for one release more: machine_squareness_rad,
+        # sensor_squareness_rad, local_machine_squareness_rad, expected_squareness_rad, and
+        # its first-order form, which keeps its old value.
         "alpha_rad": alpha,
         "beta_rad": beta,
         "local_squareness_rad": local,

@@ -80,8 +80,8 @@ night: each machine's chart runs with a constant offset ``-e / sigma`` in
 as if the baseline were exact (730 nights combined), the false-alarm rate
 averaged over baselines grows, at N = 20, by a factor of about 1.4
 (Shewhart), 7 (EWMA, ``lam = 0.1``) and 2 to 10 (CUSUM, ``k`` = 1.25 down to
-0.07); at N = 3 by 3 to 5, 45, and 19 to 28 (:func:`baseline_effect`;
-``benchmarks/monitor.py`` tabulates N = 3, 5, 10, 20). Dividing ``Delta``
+0.07); at N = 3 by 3 to 5, 45, and 19 to 28 (``benchmarks/monitor.py``
+tabulates N = 3, 5, 10, 20). Dividing ``Delta``
 by ``sqrt(u^2 + u_baseline^2)`` instead helps little: it treats the common
 error as fresh noise each night, and the EWMA and CUSUM still accumulate the
 offset (at N = 3 it cuts 10.0 false alarms a year to 6.8, where 0.5 were
@@ -112,6 +112,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy import special, stats
 
+from imu_square.blas import one_blas_thread
 from imu_square.errors import MonitorError
 from imu_square.log import logger
 from imu_square.monitor.stats.arl import (
@@ -470,6 +471,7 @@ def _check_nu(name, nu):
     return check_number(name, nu, 1.0, kind=within, allowed=within, error=MonitorError)
 
 
+@one_blas_thread()  # integral equations of 50-400 unknowns (imu_square.blas)
 def design_alarms(
     arl0_nights,
     sigma_rad,
@@ -954,36 +956,4 @@ def to_design_law(z, nu, design_nu):
     tail = np.where(normal, stats.norm.sf(a), stats.t.sf(a, np.where(normal, 1.0, n)))
     mapped = stats.norm.isf(tail) if design_nu is None else stats.t.isf(tail, design_nu)
     out[~same] = np.copysign(np.where(np.isfinite(mapped), mapped, a), z[~same])
-    return out
-
-
-def baseline_effect(design, baseline_sd_ratios):
-    """What a baseline's error does to a design's in-control run lengths.
-
-    Parameters
-    ----------
-    design : AlarmDesign
-        A design (its limits are kept as they are).
-    baseline_sd_ratios : sequence of float
-        Baseline standard errors over the night's sigma (``1/sqrt(N)`` for N runs). [1]
-
-    Returns
-    -------
-    list of dict
-        Per ratio and chart: ``rate_arl`` (one over the false-alarm rate
-        averaged over baselines), ``mean_arl`` (``E[ARL0]``) and ``p10_arl``
-        (one baseline in ten does worse). [nights]
-    """
-    law = NightLaw(design.nu)
-    charts = {
-        "shewhart": Shewhart(design.shewhart.limit),
-        "ewma": Ewma(design.ewma.parameter, design.ewma.limit),
-        "cusum": Cusum(design.cusum.parameter, design.cusum.limit),
-    }
-    out = []
-    for rho in baseline_sd_ratios:
-        row = {"baseline_sd_ratio": float(rho)}
-        for name, chart in charts.items():
-            row[name] = baseline_average(chart, law, float(rho))
-        out.append(row)
     return out

@@ -1,26 +1,20 @@
-"""Thermal drift of the measurand: first-order regressions (paper, Section 4 [1]_).
+"""Thermal drift of the measurand: a first-order regression (paper, Section 4 [1]_).
 
 The sensor's own non-orthogonality drifts while its electronics warm up, and
 ``theta_y - theta_x`` drifts with it; the paper "compensated with the
-application of a first-order regression". Two regressions, both ordinary least
-squares from ``statsmodels`` with its standard errors:
+application of a first-order regression". Here that is a regression within a
+night, by ordinary least squares from ``statsmodels`` with its standard errors,
+over the cycles: each CCW and each flipped CW cycle's ``theta_y - theta_x``
+against the sensor temperature over that cycle (or, without a temperature
+channel, the time since the board was powered), with a CCW/CW indicator,
+because the servo mismatch adds ``+m`` to CCW and ``-m`` to CW and all CCW
+cycles come before all CW cycles::
 
-- **within a night**, over the cycles: each CCW and each flipped CW cycle's
-  ``theta_y - theta_x`` against the sensor temperature over that cycle (or,
-  without a temperature channel, the time since the board was powered), with a
-  CCW/CW indicator, because the servo mismatch adds ``+m`` to CCW and ``-m`` to
-  CW and all CCW cycles come before all CW cycles::
+    s_j = a + m' d_j + b (x_j - x_ref)        d_j = +1 (CCW), -1 (CW)
 
-      s_j = a + m' d_j + b (x_j - x_ref)        d_j = +1 (CCW), -1 (CW)
-
-  ``a`` is the night's value corrected to the reference ``x_ref``. With one CCW
-  block then one CW block the slope is learnt from the trend *within* each
-  block, so its price is an inflated uncertainty of ``a`` (stated).
-- **across nights**, over the runs: each valid run's ``theta_y - theta_x``
-  against its mean temperature (or time since power-on), weighted by ``1/u^2``
-  with the scale re-estimated from the scatter::
-
-      S_k = A + B (x_k - x_ref)
+``a`` is the night's value corrected to the reference ``x_ref``. With one CCW
+block then one CW block the slope is learnt from the trend *within* each
+block, so its price is an inflated uncertainty of ``a`` (stated).
 
 The regressor is the temperature when every value has one, else the time
 since power-on: the board's sample counter starts at zero at power-up
@@ -40,7 +34,6 @@ import numpy as np
 from imu_square.errors import AnalysisError
 from imu_square.units import URAD
 
-REGRESSORS = ("temperature_c", "time_since_power_on_s")
 # A slope is "significant" below this p-value (two-sided t-test).
 SIGNIFICANCE = 0.05
 
@@ -67,7 +60,7 @@ class DriftFit:
         Its standard error. [rad]
     uncorrected_rad : float
         The plain (unregressed) value for comparison: the mean of the CCW/CW
-        pair means within a night, the weighted mean across nights. [rad]
+        pair means within the night. [rad]
     u_uncorrected_rad : float
         Its standard error from the same data. [rad]
     n : int
@@ -139,7 +132,7 @@ def cycle_drift_variable(result, recording):
     Returns
     -------
     regressor : str
-        One of :data:`REGRESSORS`.
+        ``"temperature_c"`` or ``"time_since_power_on_s"``.
     x_ccw, x_cw : ndarray, shape (n_pairs,)
         The variable over each CCW and each CW cycle. [degC or s]
     """
@@ -201,44 +194,6 @@ def fit_night_drift(result, recording, reference=None):
     fit = sm.OLS(y, design).fit()
     plain = sm.OLS(y, design[:, :2]).fit()
     return _drift_fit(regressor, x_ref, fit, plain, slope=2)
-
-
-def fit_run_drift(values_rad, u_rad, x, regressor, reference=None):
-    """Regress runs' ``theta_y - theta_x`` on their drift variable across nights.
-
-    Parameters
-    ----------
-    values_rad : array_like, shape (n_runs,)
-        Each run's ``theta_y - theta_x``. [rad]
-    u_rad : array_like, shape (n_runs,)
-        Their standard uncertainties, for the weights. [rad]
-    x : array_like, shape (n_runs,)
-        Each run's mean drift variable. [degC or s]
-    regressor : str
-        One of :data:`REGRESSORS`.
-    reference : float, optional
-        ``x_ref`` [degC or s]; the runs' mean if None.
-
-    Returns
-    -------
-    DriftFit
-
-    Raises
-    ------
-    AnalysisError
-        Fewer than 3 runs, or a drift variable that does not vary.
-    """
-    import statsmodels.api as sm
-
-    y = np.asarray(values_rad, dtype=np.float64)
-    x = np.asarray(x, dtype=np.float64)
-    w = 1.0 / np.square(np.asarray(u_rad, dtype=np.float64))
-    x_ref = float(np.mean(x)) if reference is None else float(reference)
-    _check_design(x, y.size, 3, regressor)
-    design = np.column_stack([np.ones_like(x), x - x_ref])
-    fit = sm.WLS(y, design, weights=w).fit()
-    plain = sm.WLS(y, design[:, :1], weights=w).fit()
-    return _drift_fit(regressor, x_ref, fit, plain, slope=1)
 
 
 def _drift_fit(regressor, x_ref, fit, plain, slope):

@@ -1,4 +1,4 @@
-"""A small, strict reader of the NC code that :mod:`imu_square.program.ncgen` writes.
+"""A small, strict reader of the NC code that :mod:`imu_square.program.ncgen` writes (tests only).
 
 It understands only the subset the generator uses (G0/G1/G2/G3 in the XY
 plane with incremental I/J centres, G4 dwells, M-codes, comments, program
