@@ -16,6 +16,7 @@ from imu_square.monitor.history import schema
 from imu_square.monitor.history.encoding import canonical_json
 from imu_square.monitor.history.postgres import PostgresBackend
 from imu_square.monitor.history.rows import EvaluationRow
+from imu_square.monitor.history.sql import Params
 from imu_square.monitor.history.sqlite import SqliteBackend
 from imu_square.monitor.history.store import is_postgres_url, open_history
 
@@ -36,9 +37,9 @@ def _backend(location):
 
 def _insert(db, table, values):
     names = ", ".join(values)
-    marks = ", ".join("?" * len(values))
+    p = Params(db.mark)
     return db.query(
-        f"INSERT INTO {table} ({names}) VALUES ({marks}) RETURNING id", list(values.values())
+        f"INSERT INTO {table} ({names}) VALUES ({p.list(values.values())}) RETURNING id", p.values
     )[0][0]
 
 
@@ -71,7 +72,11 @@ def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
                 "note": "",
             },
         )
-        db.execute("INSERT INTO baseline_runs (baseline_id, run_id) VALUES (?, ?)", (base, run_id))
+        p = Params(db.mark)
+        db.execute(
+            f"INSERT INTO baseline_runs (baseline_id, run_id) VALUES ({p.list((base, run_id))})",
+            p.values,
+        )
     db.close()
 
     with open_history(location) as h:
@@ -144,10 +149,11 @@ def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):
 
 def test_a_newer_schema_is_refused(location):
     with open_history(location) as h:
+        p = Params(h._db.mark)
         h._db.execute(
             "INSERT INTO schema_version (version, description, applied_at_ns, software_version) "
-            "VALUES (?, ?, ?, ?)",
-            (7, "from the future", 0, "9.0"),
+            f"VALUES ({p.list((7, 'from the future', 0, '9.0'))})",
+            p.values,
         )
     with pytest.raises(HistoryError, match=r"schema version 7 is newer than this imu-square") as e:
         open_history(location)

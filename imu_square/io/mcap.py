@@ -68,6 +68,7 @@ from imu_square.io.cdr import (
 )
 from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.io.runlog import run_outcome
+from imu_square.json_values import json_safe
 from imu_square.program import parse_program
 
 ACCEL_TOPIC = "/imu/accel"
@@ -1013,12 +1014,6 @@ def recover_mcap(src, dst):
     return contents.report
 
 
-def _json_safe(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def summarize(recording):
     """A JSON-ready summary of a recording, for ``imu-square info``.
 
@@ -1061,7 +1056,7 @@ def summarize(recording):
             "n_blocks": program.n_blocks,
             "duration_s": program.duration_s,
         },
-        "sensor": {k: _json_safe(v) for k, v in asdict(recording.sensor).items()},
+        "sensor": json_safe(recording.sensor),
         "machine_id": recording.machine_id,
         "events": dict(sorted(Counter(e.kind for e in recording.events).items())),
         "metadata": dict(recording.metadata),

@@ -8,15 +8,16 @@ and stores the night's verdict. It never prints: the ``nightly`` and
 """
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from imu_square import __version__
 from imu_square.errors import AnalysisError, ImuSquareError
+from imu_square.json_values import json_safe
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
-from imu_square.monitor.history.rows import EvaluationRow, RunRow
+from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS, EvaluationRow, RunRow
 from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
 from imu_square.monitor.verdict import design_for, iso, judge_runs, verdict
 from imu_square.units import MM_PER_MIN, URAD
@@ -114,23 +115,12 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None)
     except AnalysisError:
         pass  # too few cycles or a constant regressor: no within-night slope
     per_cycle = dict(doc["per_cycle"], drift=drift)
+    named = {f.name for f in fields(result)}  # the run's numbers the result holds by name
     return RunRow(
         **base,
+        **{name: getattr(result, name) for name in RUN_FLOAT_FIELDS if name in named},
         valid=True,
-        squareness_rad=result.squareness_rad,
-        u_squareness_rad=result.u_squareness_rad,
-        u_squareness_bootstrap_rad=result.u_squareness_bootstrap_rad,
         dof=float(result.u_squareness_dof),
-        crb_rad=result.crb_rad,
-        theta_x_rad=result.theta_x_rad,
-        theta_y_rad=result.theta_y_rad,
-        eps_c_rad=result.eps_c_rad,
-        u_eps_c_rad=result.u_eps_c_rad,
-        servo_mismatch_rad=result.servo_mismatch_rad,
-        u_servo_mismatch_rad=result.u_servo_mismatch_rad,
-        noise_density_m_s2_rthz=result.noise_density_m_s2_rthz,
-        amp_x_m_s2=result.amp_x_m_s2,
-        amp_y_m_s2=result.amp_y_m_s2,
         time_since_power_on_s=uptime,
         cycles_ccw=result.cycles_used["ccw"],
         cycles_cw=result.cycles_used["cw"],
@@ -364,7 +354,7 @@ def night_record(assessment, night, line):
         "valid": run.valid,
         "invalid_reason": run.invalid_reason,
         "reason": night.reason,
-        "drift": _jsonable_drift(night.drift),
+        "drift": json_safe(night.drift or None, urad=True),
         "drift_corrected": night.drift_corrected,
         "squareness_urad": _urad(run.squareness_rad),
         "u_squareness_urad": _urad(run.u_squareness_rad),
@@ -385,19 +375,6 @@ def night_record(assessment, night, line):
     if math.isfinite(assessment.anchor_rad) and math.isfinite(night.change_rad):
         record["machine_squareness_urad"] = (assessment.anchor_rad + night.change_rad) / URAD
     return record
-
-
-def _jsonable_drift(drift):
-    """A night's drift correction with angles in µrad, or None."""
-    if not drift:
-        return None
-    out = {}
-    for k, v in drift.items():
-        if isinstance(v, float) and ("_rad" in k):
-            out[k.replace("_rad", "_urad")] = v / URAD
-        else:
-            out[k] = v
-    return out
 
 
 def _finite(x):

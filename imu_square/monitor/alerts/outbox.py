@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from imu_square.io.atomic import fsync_dir, write_atomic
+from imu_square.json_values import from_json
 from imu_square.monitor.alerts.alert import Alert
 from imu_square.monitor.alerts.locking import try_lock
 
@@ -190,7 +191,7 @@ def claim(path):
         return Entry(
             path=Path(path),
             sink=str(doc["sink"]),
-            alert=Alert.from_dict(doc["alert"]),
+            alert=from_json(Alert, doc["alert"]),
             attempts=int(doc.get("attempts", 0)),
             last_error=doc.get("last_error"),
             fd=fd,

@@ -9,9 +9,8 @@ so that a row reads back from either backend exactly as it was stored:
   SQLite stores NaN as NULL anyway, and -0.0 becomes 0.0;
 - text fields are UTF-8 without NUL (PostgreSQL's text refuses NUL);
 - the JSON fields (``settings``, ``quality``, ``warnings``, ``per_cycle``,
-  ``result``, ``input``, ``statistics``) hold JSON values only: numpy arrays
-  become lists, numpy scalars Python numbers, non-finite floats None, tuples
-  lists and keys text. They are stored as canonical JSON text
+  ``result``, ``input``, ``statistics``) hold JSON values only, by
+  :func:`~imu_square.json_values.json_safe`'s rules. They are stored as canonical JSON text
   (:func:`~imu_square.monitor.history.encoding.canonical_json`), byte-identical
   whichever backend or process wrote them. Treat them as read-only.
 
@@ -25,7 +24,8 @@ from dataclasses import dataclass, field
 
 from imu_square import __version__
 from imu_square.errors import HistoryError, check_option
-from imu_square.monitor.history.encoding import datetime_from_ns, json_native, settings_hash
+from imu_square.json_values import JsonValueError, json_safe
+from imu_square.monitor.history.encoding import datetime_from_ns, settings_hash
 
 #: The monitor's verdicts on a run (issue 11, section 5).
 EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
@@ -120,7 +120,13 @@ def _bool(row, name):
 
 
 def _json(row, name, kind):
-    value = json_native(getattr(row, name), _where(row, name))
+    try:
+        value = json_safe(getattr(row, name), _where(row, name))
+    except JsonValueError as exc:
+        raise HistoryError(
+            f"{_where(row, name)} must hold JSON values (dicts, lists, text, numbers), "
+            f"got a {type(exc.value).__name__}: {exc.value!r}"
+        ) from None
     if not isinstance(value, kind):
         raise HistoryError(
             f"{_where(row, name)} must be a JSON {kind.__name__}, got {type(value).__name__}"
@@ -302,11 +308,6 @@ class RunRow:
     def recorded_at(self):
         """When the recording started (aware UTC datetime, or None)."""
         return datetime_from_ns(self.recorded_at_ns)
-
-    @property
-    def analysed_at(self):
-        """When the run was analysed (aware UTC datetime, or None)."""
-        return datetime_from_ns(self.analysed_at_ns)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from imu_square import __version__
 from imu_square.errors import HistoryError
 from imu_square.monitor.history.encoding import first_line, now_ns
+from imu_square.monitor.history.sql import Params
 
 _ID = {
     "sqlite": "INTEGER PRIMARY KEY",
@@ -252,10 +253,12 @@ def migrate(backend, target=None):
             try:
                 for statement in m.sql(backend.name):
                     backend.execute(statement)
+                p = Params(backend.mark)
+                values = p.list((m.version, m.description, now_ns(), __version__))
                 backend.execute(
                     "INSERT INTO schema_version "
-                    "(version, description, applied_at_ns, software_version) VALUES (?, ?, ?, ?)",
-                    (m.version, m.description, now_ns(), __version__),
+                    f"(version, description, applied_at_ns, software_version) VALUES ({values})",
+                    p.values,
                 )
             except HistoryError as exc:
                 cause = exc.__cause__ or exc
