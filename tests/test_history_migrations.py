@@ -15,10 +15,10 @@ from imu_square.errors import HistoryError
 from imu_square.monitor.history import schema
 from imu_square.monitor.history.encoding import canonical_json
 from imu_square.monitor.history.postgres import PostgresBackend
-from imu_square.monitor.history.rows import EvaluationRow
+from imu_square.monitor.history.rows import EvaluationRow, OutboxRow
 from imu_square.monitor.history.sql import Params
 from imu_square.monitor.history.sqlite import SqliteBackend
-from imu_square.monitor.history.store import is_postgres_url, open_history
+from imu_square.monitor.history.store import RUNS, is_postgres_url, open_history
 
 CHILD = Path(__file__).with_name("history_child.py")
 JSON_FIELDS = ("settings", "quality", "warnings", "per_cycle", "result")
@@ -111,6 +111,31 @@ def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
     with open_history(fresh_location) as fresh:
         assert fresh._db.tables() == set(schema.TABLES)
         assert {t: sorted(fresh._db.columns(t)) for t in schema.TABLES} == migrated
+
+
+def test_a_version_3_history_gets_an_empty_outbox_and_keeps_its_runs(location):
+    db = _backend(location)
+    assert schema.migrate(db, target=3) == 3
+    assert "outbox" not in db.tables()
+    row = run_for(1)
+    with db.transaction(write=True):
+        run_id = _insert(db, "runs", RUNS.values(row))
+    db.close()
+
+    with open_history(location) as h:
+        assert h.schema_version == schema.latest_version()
+        assert h.runs(MACHINE) == [dataclasses.replace(row, id=run_id)]
+        assert h.outbox(MACHINE) == []
+        alert = OutboxRow(
+            machine_id=MACHINE,
+            alert_id="0123456789abcdef0123456789abcdef",
+            sink="webhook",
+            created_at_ns=row.recorded_at_ns,
+            alert={"schema": "imu-square.alert/1", "state": "alarm", "record": {"run_id": run_id}},
+        )
+        outbox_id = h.add_alert(alert)
+        (got,) = h.outbox(MACHINE)
+        assert got == dataclasses.replace(alert, id=outbox_id, updated_at_ns=got.updated_at_ns)
 
 
 def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):

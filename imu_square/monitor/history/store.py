@@ -44,11 +44,13 @@ from imu_square.monitor.history.encoding import (
     ns_from_datetime,
     settings_hash,
 )
+from imu_square.monitor.history.outbox import OUTBOX, Outbox
 from imu_square.monitor.history.rows import (
     EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
     EvaluationRow,
+    OutboxRow,
     RunRow,
 )
 from imu_square.monitor.history.sql import Params, Table
@@ -59,6 +61,7 @@ __all__ = [
     "BaselineRow",
     "EvaluationRow",
     "History",
+    "OutboxRow",
     "RunRow",
     "datetime_from_ns",
     "default_history_path",
@@ -78,7 +81,7 @@ BASELINES = Table("baselines", BaselineRow, skip=("run_ids",))  # in baseline_ru
 ANCHORS = Table("anchors", AnchorRow)
 EVALUATIONS = Table("evaluations", EvaluationRow)
 #: Every table's columns as this module reads and writes them.
-COLUMNS = {t.name: t.columns for t in (RUNS, BASELINES, ANCHORS, EVALUATIONS)} | {
+COLUMNS = {t.name: t.columns for t in (RUNS, BASELINES, ANCHORS, EVALUATIONS, OUTBOX)} | {
     "baseline_runs": ["baseline_id", "run_id"],
     "schema_version": ["version", "description", "applied_at_ns", "software_version"],
 }
@@ -166,7 +169,7 @@ def _window(p, column, since, until):
     return [f"{column} {op} {p(t)}" for op, t in ((">=", since), ("<", until)) if t is not None]
 
 
-class History:
+class History(Outbox):
     """An open history; see the module's docstring. Made by :func:`open_history`.
 
     Attributes
