@@ -57,6 +57,7 @@ import numpy as np
 from scipy import stats
 
 from imu_square.errors import AnalysisError
+from imu_square.json_values import json_safe
 from imu_square.monitor.stats.alarms import (
     NIGHTS_PER_YEAR,
     design_alarms,
@@ -398,17 +399,6 @@ def _finite(v):
     return None if v is None or not math.isfinite(v) else float(v)
 
 
-def _jsonable(obj):
-    """Nested results with ``inf``/``nan`` as None (strict JSON)."""
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def _fmt(v, digits=0):
     return "-" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
 
@@ -550,7 +540,7 @@ def main(argv=None):
         print(f"\n{name}: {prog['design_text']}")
     print(f"\ntotal {results['wall_s']:.0f} s")
     RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps(_jsonable(results), indent=1, allow_nan=False))
+    RESULTS.write_text(json.dumps(json_safe(results), indent=1, allow_nan=False))
     print(f"wrote {RESULTS}", file=sys.stderr)
     return 0
 

@@ -15,9 +15,10 @@ from imu_square.errors import HistoryError
 from imu_square.monitor.history import schema
 from imu_square.monitor.history.encoding import canonical_json
 from imu_square.monitor.history.postgres import PostgresBackend
-from imu_square.monitor.history.rows import EvaluationRow
+from imu_square.monitor.history.rows import EvaluationRow, OutboxRow
+from imu_square.monitor.history.sql import Params
 from imu_square.monitor.history.sqlite import SqliteBackend
-from imu_square.monitor.history.store import is_postgres_url, open_history
+from imu_square.monitor.history.store import RUNS, is_postgres_url, open_history
 
 CHILD = Path(__file__).with_name("history_child.py")
 JSON_FIELDS = ("settings", "quality", "warnings", "per_cycle", "result")
@@ -36,9 +37,9 @@ def _backend(location):
 
 def _insert(db, table, values):
     names = ", ".join(values)
-    marks = ", ".join("?" * len(values))
+    p = Params(db.mark)
     return db.query(
-        f"INSERT INTO {table} ({names}) VALUES ({marks}) RETURNING id", list(values.values())
+        f"INSERT INTO {table} ({names}) VALUES ({p.list(values.values())}) RETURNING id", p.values
     )[0][0]
 
 
@@ -71,7 +72,11 @@ def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
                 "note": "",
             },
         )
-        db.execute("INSERT INTO baseline_runs (baseline_id, run_id) VALUES (?, ?)", (base, run_id))
+        p = Params(db.mark)
+        db.execute(
+            f"INSERT INTO baseline_runs (baseline_id, run_id) VALUES ({p.list((base, run_id))})",
+            p.values,
+        )
     db.close()
 
     with open_history(location) as h:
@@ -106,6 +111,31 @@ def test_a_version_1_history_is_migrated_and_keeps_its_rows(location, tmp_path):
     with open_history(fresh_location) as fresh:
         assert fresh._db.tables() == set(schema.TABLES)
         assert {t: sorted(fresh._db.columns(t)) for t in schema.TABLES} == migrated
+
+
+def test_a_version_3_history_gets_an_empty_outbox_and_keeps_its_runs(location):
+    db = _backend(location)
+    assert schema.migrate(db, target=3) == 3
+    assert "outbox" not in db.tables()
+    row = run_for(1)
+    with db.transaction(write=True):
+        run_id = _insert(db, "runs", RUNS.values(row))
+    db.close()
+
+    with open_history(location) as h:
+        assert h.schema_version == schema.latest_version()
+        assert h.runs(MACHINE) == [dataclasses.replace(row, id=run_id)]
+        assert h.outbox(MACHINE) == []
+        alert = OutboxRow(
+            machine_id=MACHINE,
+            alert_id="0123456789abcdef0123456789abcdef",
+            sink="webhook",
+            created_at_ns=row.recorded_at_ns,
+            alert={"schema": "imu-square.alert/1", "state": "alarm", "record": {"run_id": run_id}},
+        )
+        outbox_id = h.add_alert(alert)
+        (got,) = h.outbox(MACHINE)
+        assert got == dataclasses.replace(alert, id=outbox_id, updated_at_ns=got.updated_at_ns)
 
 
 def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):
@@ -144,10 +174,11 @@ def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):
 
 def test_a_newer_schema_is_refused(location):
     with open_history(location) as h:
+        p = Params(h._db.mark)
         h._db.execute(
             "INSERT INTO schema_version (version, description, applied_at_ns, software_version) "
-            "VALUES (?, ?, ?, ?)",
-            (7, "from the future", 0, "9.0"),
+            f"VALUES ({p.list((7, 'from the future', 0, '9.0'))})",
+            p.values,
         )
     with pytest.raises(HistoryError, match=r"schema version 7 is newer than this imu-square") as e:
         open_history(location)

@@ -23,6 +23,7 @@ from imu_square.errors import HistoryError, ImuSquareError
 from imu_square.monitor.history import store
 from imu_square.monitor.history.encoding import canonical_json
 from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS
+from imu_square.monitor.history.sql import Params
 from imu_square.monitor.history.store import (
     EVALUATION_STATES,
     AnchorRow,
@@ -400,6 +401,22 @@ def test_the_tables_have_the_columns_the_store_uses(location):
         db = h._db
         for table, columns in store.COLUMNS.items():
             assert sorted(db.columns(table)) == sorted(columns), table
+
+
+def test_sql_holding_a_literal_question_mark_and_percent_runs_as_written(history):
+    # The backends take their own parameter markers; the SQL text is never rewritten.
+    path = "/data/100% done/what?.mcap"
+    history.add_run(dataclasses.replace(run_for(1), recording_path=path))
+    history.add_run(run_for(2))
+    db = history._db
+    p = Params(db.mark)
+    rows = db.query(
+        "SELECT '?', '%', recording_path FROM runs "
+        f"WHERE recording_path LIKE '%?%' AND recording_path LIKE {p('%100%')} "
+        f"AND machine_id = {p(MACHINE)}",
+        p.values,
+    )
+    assert rows == [("?", "%", path)]
 
 
 def test_backup_holds_every_committed_run(history, tmp_path):

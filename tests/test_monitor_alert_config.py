@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from imu_square.errors import ConfigError, MonitorConfigError
+from imu_square.errors import ConfigError, ImuSquareWarning, MonitorConfigError
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES
 from imu_square.monitor.alerts.config import AlertsConfig, RetryPolicy, alerts_from_mapping
 
@@ -15,7 +15,6 @@ states = ["alarm", "stale_baseline"]
 attempts = 3
 backoff_s = 0.25
 max_total_s = 6
-outbox = "spool"
 
 [alerts.log]
 states = ["alarm"]
@@ -75,7 +74,6 @@ def test_a_full_section_gives_every_sink_with_its_defaults_and_resolved_paths():
     ]  # fmt: skip
     log, latest, every, hook, slack, mail = config.sinks
     assert config.retry == RetryPolicy(3, 0.25, 6.0)
-    assert config.outbox == Path("/etc/imu/spool")
     assert log.states == ("alarm",)
     # A sink without states takes [alerts] states; one with states keeps its own.
     assert latest.states == ("alarm", "stale_baseline") and latest.mode == "latest"
@@ -92,6 +90,17 @@ def test_a_full_section_gives_every_sink_with_its_defaults_and_resolved_paths():
     assert mail.password_file == Path("/etc/imu/secrets/smtp")
     assert mail.ca_file == Path("/etc/ssl/private-ca.pem")
     assert mail.states == ("alarm", "stale_baseline")
+
+
+def test_an_old_outbox_folder_still_loads_with_one_warning_that_it_is_no_longer_used():
+    # The pending alerts live in the history now; older monitor files name a folder.
+    with pytest.warns(ImuSquareWarning) as caught:
+        config = parse(FULL.replace("max_total_s = 6\n", 'max_total_s = 6\noutbox = "spool"\n'))
+    assert [str(w.message) for w in caught] == [
+        "monitor.toml: [alerts] outbox is no longer used: the pending alerts are kept in the "
+        "history; remove the field"
+    ]
+    assert config == parse(FULL)
 
 
 def test_default_states_alert_on_everything_but_ok_and_no_baseline():

@@ -13,10 +13,12 @@ import pytest
 from alert_servers import Hook, Mailbox, free_port
 
 import imu_square.monitor
-from imu_square.errors import ImuSquareError, MonitorError
+from imu_square.errors import ImuSquareError
 from imu_square.monitor.alerts.alert import make_alert, one_line
 from imu_square.monitor.alerts.config import alerts_from_mapping
-from imu_square.monitor.alerts.send import deliver_pending, send_alerts
+from imu_square.monitor.alerts.json_file import JsonFileSink
+from imu_square.monitor.alerts.send import deliver_alerts, queue_alert
+from imu_square.monitor.history.store import open_history
 
 # aiosmtpd counts only STARTTLS as TLS and warns when AUTH is allowed without it.
 pytestmark = pytest.mark.filterwarnings("ignore:Requiring AUTH while not requiring TLS")
@@ -24,32 +26,34 @@ pytestmark = pytest.mark.filterwarnings("ignore:Requiring AUTH while not requiri
 RECORD = {"change_urad": 14.2, "u_change_urad": 3.1, "warnings": ["slow feed"]}
 
 
+@pytest.fixture
+def history(tmp_path_factory):
+    with open_history(tmp_path_factory.mktemp("history") / "history.db") as h:
+        yield h
+
+
 def send(
-    config, outbox, state="alarm", verdict="changed", machine_id="mill-3", record=RECORD, now=None
+    config, history, state="alarm", verdict="changed", machine_id="mill-3", record=RECORD, now=None
 ):
-    return send_alerts(
-        config,
-        record,
-        machine_id=machine_id,
-        state=state,
-        verdict=verdict,
-        outbox_dir=outbox,
-        now=now,
+    """A night's alert kept in the outbox, then delivered with what is pending."""
+    alert = queue_alert(
+        config, history, record, machine_id=machine_id, state=state, verdict=verdict, now=now
     )
+    return deliver_alerts(config, history, machine_id, alert)
 
 
 def by_sink(report):
     return {o.sink: o for o in report.outcomes}
 
 
-def test_the_log_line_has_a_level_per_state_and_cannot_be_split(tmp_path, caplog):
+def test_the_log_line_has_a_level_per_state_and_cannot_be_split(history, caplog):
     config = alerts_from_mapping(None)
     caplog.set_level(logging.INFO, logger="imu_square")
     for state, level in [("ok", "INFO"), ("stale_baseline", "WARNING"), ("alarm", "ERROR")]:
         caplog.clear()
         send(
             config,
-            tmp_path,
+            history,
             state=state,
             verdict="line one\nFAKE: second line",
             machine_id="m\r\n1",
@@ -57,19 +61,19 @@ def test_the_log_line_has_a_level_per_state_and_cannot_be_split(tmp_path, caplog
         (record,) = [r for r in caplog.records if r.getMessage().startswith("alert:")]
         assert record.levelname == level
         assert record.getMessage() == f"alert: machine 'm 1' {state}: line one FAKE: second line"
-    # Only the log sink: nothing is written to the outbox.
-    assert not tmp_path.exists() or not list(tmp_path.iterdir())
+    # Only the log sink: nothing is kept in the outbox.
+    assert history.outbox("m\r\n1") == [] and history.outbox("m\r\n1", "delivered") == []
 
 
-def test_the_latest_json_file_holds_the_newest_alert_whatever_the_delivery_order(tmp_path):
+def test_the_latest_json_file_holds_the_newest_alert_whatever_the_delivery_order(tmp_path, history):
     path = tmp_path / "latest.json"
     config = alerts_from_mapping({"json_file": {"path": str(path)}})
-    report = send(config, tmp_path / "outbox")
+    report = send(config, history)
     assert by_sink(report)["json_file"].status == "sent"
     assert json.loads(path.read_text()) == report.alert.as_dict()
     # A dashboard running as another user can read it, and no temporary file is left.
     assert stat.S_IMODE(path.stat().st_mode) == 0o644
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["latest.json", "outbox"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["latest.json"]
     sink = config.sink("json_file")
     t = dt.datetime.now(dt.UTC) + dt.timedelta(days=1)
     newer = make_alert(RECORD, machine_id="m", state="ok", verdict="newer", now=t)
@@ -81,12 +85,12 @@ def test_the_latest_json_file_holds_the_newest_alert_whatever_the_delivery_order
     assert json.loads(path.read_text())["verdict"] == "newer"
 
 
-def test_the_append_file_is_json_lines_with_each_alert_once(tmp_path):
+def test_the_append_file_is_json_lines_with_each_alert_once(tmp_path, history):
     path = tmp_path / "alerts.jsonl"
     config = alerts_from_mapping(
         {"json_file": {"path": str(path), "mode": "append", "states": ["ok", "alarm"]}}
     )
-    reports = [send(config, tmp_path / "o", state=s) for s in ("ok", "alarm", "warning", "ok")]
+    reports = [send(config, history, state=s) for s in ("ok", "alarm", "warning", "ok")]
     assert [by_sink(r)["json_file"].status for r in reports] == ["sent", "sent", "skipped", "sent"]
     lines = path.read_text().splitlines()
     assert [json.loads(line)["alert_id"] for line in lines] == [
@@ -96,22 +100,22 @@ def test_the_append_file_is_json_lines_with_each_alert_once(tmp_path):
     assert len(path.read_text().splitlines()) == 3
 
 
-def test_a_json_file_whose_folder_is_missing_waits_in_the_outbox_until_it_exists(tmp_path):
+def test_a_json_file_whose_folder_is_missing_waits_in_the_outbox_until_it_exists(tmp_path, history):
     folder = tmp_path / "not-mounted"
     config = alerts_from_mapping(
         {"json_file": {"path": str(folder / "latest.json")}, "attempts": 2, "backoff_s": 0.01}
     )
-    first = send(config, tmp_path / "outbox")
+    first = send(config, history)
     result = by_sink(first)["json_file"]
     assert (result.status, result.attempts) == ("pending", 2)
     assert "cannot write" in result.error and "No such file or directory" in result.error
     folder.mkdir()
-    second = send(config, tmp_path / "outbox", state="warning")
+    second = send(config, history, state="warning")
     assert [o.status for o in second.backlog] == ["sent"]
     assert json.loads((folder / "latest.json").read_text())["alert_id"] == second.alert.alert_id
 
 
-def test_non_finite_numbers_become_null_and_the_report_is_json(tmp_path):
+def test_non_finite_numbers_become_null_and_the_report_is_json(tmp_path, history):
     path = tmp_path / "a.json"
     config = alerts_from_mapping({"json_file": {"path": str(path)}})
     record = {
@@ -120,7 +124,7 @@ def test_non_finite_numbers_become_null_and_the_report_is_json(tmp_path):
         "n": [1.5, -math.inf],
         "p": Path("/x"),
     }
-    report = send(config, tmp_path / "o", state="invalid", record=record)
+    report = send(config, history, state="invalid", record=record)
     assert json.loads(path.read_text())["record"] == {
         "change_urad": None, "u_change_urad": None, "n": [1.5, None], "p": "/x",
     }  # fmt: skip
@@ -129,81 +133,82 @@ def test_non_finite_numbers_become_null_and_the_report_is_json(tmp_path):
     assert [o["status"] for o in as_json["outcomes"]] == ["sent", "sent"]
 
 
-def test_a_bad_state_or_record_is_refused_before_anything_is_sent(tmp_path):
+def test_a_bad_state_or_record_is_refused_before_anything_is_sent(tmp_path, history):
     config = alerts_from_mapping({"json_file": {"path": str(tmp_path / "a.json")}})
     with pytest.raises(ImuSquareError, match=r"state must be one of .*got 'alarming'"):
-        send(config, tmp_path / "o", state="alarming")
+        send(config, history, state="alarming")
     with pytest.raises(TypeError, match=r"record.when: cannot be sent as JSON: object"):
-        send(config, tmp_path / "o", record={"when": object()})
+        send(config, history, record={"when": object()})
     assert not (tmp_path / "a.json").exists()
-    with pytest.raises(ValueError, match="no outbox folder"):
-        send_alerts(config, {}, machine_id="m", state="ok", verdict="v")
+    assert history.outbox("mill-3") == []
 
 
-def test_an_unwritable_outbox_does_not_stop_delivery_and_a_lost_alert_is_in_the_log(
-    tmp_path, caplog
-):
-    not_a_folder = tmp_path / "outbox"
-    not_a_folder.write_text("a file where the outbox should be")
+def test_the_alerts_are_kept_with_the_night_or_not_at_all(history):
+    # Written in the night's transaction: a night that fails to be stored leaves no alert,
+    # and nothing is sent before the commit.
     with Hook() as hook:
-        report = send(alerts_from_mapping({"webhook": {"url": hook.url}}), not_a_folder)
+        config = alerts_from_mapping({"webhook": {"url": hook.url}})
+        with pytest.raises(RuntimeError, match="the night could not be stored"):
+            with history.transaction():
+                queue_alert(
+                    config, history, RECORD, machine_id="mill-3", state="alarm", verdict="v"
+                )
+                assert len(history.outbox("mill-3")) == 1 and hook.requests == []
+                raise RuntimeError("the night could not be stored")
+        assert history.outbox("mill-3") == []
+        with history.transaction():
+            alert = queue_alert(
+                config, history, RECORD, machine_id="mill-3", state="alarm", verdict="v"
+            )
+        assert [r.alert_id for r in history.outbox("mill-3")] == [alert.alert_id]
+        assert hook.requests == []
+        report = deliver_alerts(config, history, "mill-3", alert)
     assert by_sink(report)["webhook"].status == "sent" and len(hook.requests) == 1
-    caplog.clear()
-    down = alerts_from_mapping(
-        {"webhook": {"url": f"http://127.0.0.1:{free_port()}/"}, "attempts": 1}
-    )
-    report = send(down, not_a_folder)
-    assert by_sink(report)["webhook"].status == "failed"
-    assert any(
-        report.alert.alert_id in r.getMessage() and "not delivered and not kept" in r.getMessage()
-        for r in caplog.records
-    )
+    (row,) = history.outbox("mill-3", "delivered")
+    assert (row.alert_id, row.sink, row.attempts) == (alert.alert_id, "webhook", 1)
 
 
-def test_a_broken_outbox_is_one_clear_error_alone_and_only_logged_within_send(tmp_path, caplog):
-    # A name clash with a folder: os.replace fails whoever runs the test, root included.
-    outbox = tmp_path / "outbox"
-    name = "20260101T000000.000000Z-0123456789abcdef0123456789abcdef-kept.json"
-    (outbox / "rejected").mkdir(parents=True)
-    (outbox / "rejected" / name).write_text("{}")
-    (outbox / name).mkdir()
-    path = tmp_path / "a.json"
-    config = alerts_from_mapping({"json_file": {"name": "kept", "path": str(path)}})
-    with pytest.raises(MonitorError, match=r"outbox: cannot read the alert outbox: .*directory"):
-        deliver_pending(config, outbox, include_rejected=True)
-    # An unreadable entry that cannot even be set aside: logged, and tonight's alert still goes.
-    (outbox / name).rmdir()
-    (outbox / name).write_text("{not json")
-    (outbox / "rejected" / name).unlink()
-    (outbox / "rejected" / name).mkdir()
-    report = send(config, outbox)
-    assert by_sink(report)["kept"].status == "sent" and path.exists()
-    assert report.backlog == ()
-    assert any("unexpected error in kept" in r.getMessage() for r in caplog.records)
+def test_a_sink_that_fails_unexpectedly_keeps_its_alert_and_the_others_still_get_theirs(
+    tmp_path, history, monkeypatch, caplog
+):
+    def broken(self, alert, timeout_s=None):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(JsonFileSink, "deliver", broken)
+    with Hook() as hook:
+        config = alerts_from_mapping(
+            {"json_file": {"path": str(tmp_path / "a.json")}, "webhook": {"url": hook.url},
+             "attempts": 1}
+        )  # fmt: skip
+        report = send(config, history)
+    assert [(o.sink, o.status) for o in report.outcomes] == [
+        ("log", "sent"), ("json_file", "pending"), ("webhook", "sent"),
+    ]  # fmt: skip
+    assert by_sink(report)["json_file"].error == "ZeroDivisionError: a bug"
+    assert [r.sink for r in history.outbox("mill-3")] == ["json_file"]
+    assert any("unexpected error" in r.getMessage() for r in caplog.records)
 
 
-def test_entries_of_a_removed_sink_and_unreadable_entries_are_set_aside(tmp_path, caplog):
-    outbox = tmp_path / "outbox"
+def test_alerts_of_a_removed_sink_are_rejected_and_kept(history):
     port = free_port()
     config = alerts_from_mapping(
         {"webhook": [{"name": "old", "url": f"http://127.0.0.1:{port}/"},
                      {"name": "kept", "url": f"http://127.0.0.1:{port}/"}], "attempts": 1}
     )  # fmt: skip
-    report = send(config, outbox)
+    report = send(config, history)
     assert [o.status for o in report.outcomes] == ["sent", "pending", "pending"]
-    garbage = outbox / "20260101T000000.000000Z-0123456789abcdef0123456789abcdef-kept.json"
-    garbage.write_text("{not json")
     with Hook(port=port) as hook:
         later = alerts_from_mapping({"webhook": {"name": "kept", "url": hook.url}})
-        results = deliver_pending(later, outbox)
+        results = deliver_alerts(later, history, "mill-3").backlog
     assert sorted((o.sink, o.status) for o in results) == [("kept", "sent"), ("old", "rejected")]
     assert "no longer in the monitor file" in next(o.error for o in results if o.sink == "old")
     assert len(hook.requests) == 1
-    assert sorted(p.name for p in (outbox / "rejected").iterdir()) == sorted(
-        [garbage.name, Path(next(o.outbox_path for o in results if o.sink == "old")).name]
-    )
-    assert any("not a readable outbox entry" in r.getMessage() for r in caplog.records)
-    assert list(outbox.glob("*.json")) == []
+    (rejected,) = history.outbox("mill-3", "rejected")
+    assert rejected.sink == "old" and "no longer in the monitor file" in rejected.last_error
+    assert rejected.id == next(o.outbox_id for o in results if o.sink == "old")
+    assert history.outbox("mill-3") == []
+    # Kept, not retried: the next round leaves it alone.
+    assert deliver_alerts(later, history, "mill-3").backlog == ()
 
 
 def test_the_monitor_package_never_starts_a_process():
@@ -233,7 +238,7 @@ META_LINES = f"{META}\nsecond line\r\nBcc: thief@localhost"
 
 
 def test_shell_metacharacters_in_every_field_of_every_sink_arrive_verbatim_and_run_nothing(
-    tmp_path, monkeypatch, caplog
+    tmp_path, history, monkeypatch, caplog
 ):
     monkeypatch.chdir(tmp_path)  # where a shell running "touch pwned" would leave its mark
     victim = tmp_path / "victim"
@@ -271,9 +276,7 @@ def test_shell_metacharacters_in_every_field_of_every_sink_arrive_verbatim_and_r
         }  # fmt: skip
         config = alerts_from_mapping(table, "monitor.toml", base_dir=tmp_path)
         record = {"machine_id": META_LINES, "recording": f"/data/{META}.mcap", META: [META_LINES]}
-        report = send(
-            config, tmp_path / "outbox", machine_id=META_LINES, verdict=META_LINES, record=record
-        )
+        report = send(config, history, machine_id=META_LINES, verdict=META_LINES, record=record)
     assert [(o.sink, o.status) for o in report.outcomes] == [
         ("log", "sent"), ("json_file-1", "sent"), ("json_file-2", "sent"), ("webhook", "sent"),
         ("email-1", "sent"), ("email-2", "sent"),

@@ -71,6 +71,34 @@ def test_clean_nights_raise_no_alarm_and_a_10um_degradation_does(rig, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.filterwarnings("always::imu_square.errors.ImuSquareWarning")
+def test_the_nights_alert_is_kept_in_the_history_and_an_old_outbox_folder_is_not_used(rig, capsys):
+    config = rig / "monitor.toml"
+    # A monitor file of an older imu-square names the folder its alerts waited in.
+    text = config.read_text().replace(
+        "[alerts.json_file]", '[alerts]\noutbox = "spool"\n\n[alerts.json_file]'
+    )
+    config.write_text(text)
+    for day in (5, 6):
+        code = main(["nightly", "--config", str(config), "--recording", str(night(rig, day))])
+        assert code in (EXIT_CODES["ok"], EXIT_CODES["warning"])
+        err = capsys.readouterr().err
+        assert err.count("warning: ") == 1
+        assert f"{config}: [alerts] outbox is no longer used: the pending alerts are kept" in err
+    assert not (rig / "spool").exists() and not (rig / "data" / "outbox").exists()
+    # Each night's alert was stored with the night, then delivered to the JSON file.
+    with open_history(rig / "history.db") as h:
+        rows = h.outbox("m1", "delivered")
+        runs = {Path(r.recording_path).name: r.id for r in h.runs("m1")}
+    assert [r.alert["record"]["run_id"] for r in rows] == [
+        runs["night-005.mcap"],
+        runs["night-006.mcap"],
+    ]
+    assert {r.sink for r in rows} == {"json_file"}
+    assert json.loads((rig / "data" / "alert.json").read_text())["alert_id"] == rows[-1].alert_id
+
+
+@pytest.mark.slow
 def test_a_remount_makes_the_baseline_stale_never_an_alarm(rig, capsys):
     config = rig / "monitor.toml"
     turned = replace(SENSOR, eps_c_rad=SENSOR.eps_c_rad + math.radians(1.5), beta_rad=900e-6)

@@ -287,8 +287,8 @@ def run_monitor(args, config=None):
                 header_timeout_s=config.sensor.header_timeout_s,
             )
             complete = status.complete
-        outcome = judge_recording(config, history, path, program, complete)
-        files = write_night_outputs(config, outcome, out)
+        outcome = judge_recording(config, history, path, program, complete, alert=True)
+        files = write_night_outputs(config, history, outcome, out)
     for name, value in (("trend chart", files.trend_png), ("report", files.report_html)):
         if value is not None:
             print(f"wrote the {name} {value}", file=sys.stderr)
@@ -314,7 +314,6 @@ def _check_night(config, out, recording):
     from imu_square.simulate import read_machine, read_sensor
 
     ensure_folder(out, "data")
-    ensure_folder(config.outbox_dir(), "alert outbox")
     if config.metrics is not None and config.metrics.textfile is not None:
         ensure_folder(Path(config.metrics.textfile).parent, "metrics")
     for sink in config.alerts.sinks:

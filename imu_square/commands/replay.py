@@ -203,14 +203,9 @@ def _rebaseline(original, config, history):
         print(f"no baseline for the replayed runs: {exc}", file=sys.stderr)
 
 
-def _finite(x):
-    return x if x == x else None  # NaN is None in the history
-
-
 def _judge_all(config, history, summary):
     """Judge every run in recording-time order and store the verdicts."""
-    from imu_square.monitor.history.rows import EvaluationRow
-    from imu_square.monitor.night import judge_history
+    from imu_square.monitor.night import judge_history, store_verdict
     from imu_square.monitor.verdict import iso
 
     assessment = judge_history(config, history)
@@ -227,17 +222,7 @@ def _judge_all(config, history, summary):
                 and (recorded < start)
             ):
                 continue  # judged against the baseline of its time, kept as it was
-            judged = base is not None and night.state != "no_baseline"
-            history.add_evaluation(
-                EvaluationRow(
-                    run_id=night.run.id,
-                    baseline_id=base.id if judged else None,
-                    state=night.state,
-                    change_rad=_finite(night.change_rad),
-                    u_change_rad=_finite(night.u_change_rad),
-                    statistics={} if night.chart is None else night.chart.to_json_dict(),
-                )
-            )
+            store_verdict(history, base, night)
     summary.alarm_nights = [
         iso(n.run.recorded_at_ns)
         for n in assessment.nights

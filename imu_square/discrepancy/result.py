@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imu_square.discrepancy.views import VIEWS
+from imu_square.json_values import json_safe
 from imu_square.units import UG
 
 
@@ -184,15 +185,15 @@ class DiscrepancyResult:
             "final_gap": _gap_dict(self.final_gap),
             "named_effects": list(self.named_effects),
             "ambiguous": [list(g) for g in self.ambiguous],
-            "suggested_tests": [_jsonable(s) for s in self.suggested_tests],
+            "suggested_tests": [json_safe(s) for s in self.suggested_tests],
             "base_parameters": {p.name: p.to_json_dict() for p in self.base},
             "model": {p.name: p.to_json_dict() for p in self.model},
             "views": {
                 "base": {k: v.to_json_dict() for k, v in self.base_gap.items()},
                 "final": {k: v.to_json_dict() for k, v in self.final_gap.items()},
             },
-            "correlations": _jsonable(self.correlations),
-            "noise_floor": _jsonable(self.noise),
+            "correlations": json_safe(self.correlations),
+            "noise_floor": json_safe(self.noise),
             "significance": self.significance,
             "candidates": list(self.candidates),
             "notes": list(self.notes),
@@ -263,15 +264,3 @@ def _num(x):
 
 def _gap_dict(gaps):
     return {k: _num(v.gap) for k, v in gaps.items()}
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple | np.ndarray):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, float):
-        return _num(obj)
-    return obj

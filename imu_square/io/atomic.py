@@ -30,7 +30,7 @@ def fsync_dir(folder):
         os.close(fd)
 
 
-def write_atomic(path, data, mode=0o644, before_replace=None):
+def write_atomic(path, data, mode=0o644):
     """Replace ``path`` with ``data`` atomically and durably.
 
     Parameters
@@ -42,11 +42,6 @@ def write_atomic(path, data, mode=0o644, before_replace=None):
     mode : int
         Permission bits of the new file. The default 0o644 lets a collector
         running as another user (node_exporter, a dashboard) read it.
-    before_replace : callable, optional
-        Called with the temporary file's descriptor after the data is synced
-        and before the rename, e.g. to lock the file so that it is locked from
-        the moment it has its name (the descriptor is closed on return: the
-        callable keeps an :func:`os.dup` of it if it needs one).
 
     Returns
     -------
@@ -62,8 +57,6 @@ def write_atomic(path, data, mode=0o644, before_replace=None):
             os.fsync(f.fileno())
             if hasattr(os, "fchmod"):
                 os.fchmod(f.fileno(), mode)
-            if before_replace is not None:
-                before_replace(f.fileno())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

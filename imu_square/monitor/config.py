@@ -265,10 +265,6 @@ class MonitorConfig:
         base = default_history_path().parent if is_postgres_url(location) else Path(location).parent
         return base / self.machine_id
 
-    def outbox_dir(self):
-        """Folder of alerts not yet delivered."""
-        return self.alerts.outbox or self.output_dir() / "outbox"
-
 
 def monitor_from_mapping(doc, path):
     """Validate a parsed monitor file.

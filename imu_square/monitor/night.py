@@ -3,20 +3,23 @@
 :func:`judge_recording` analyses a recording, stores it in the history (as an
 invalid run with its one-line reason when it cannot be trusted), marks the
 baseline stale on a sensor remount, runs the alarm charts over the history
-and stores the night's verdict. It never prints: the ``nightly`` and
-``replay`` commands report what it returns.
+and stores the night's verdict and its pending alerts, in one transaction.
+It never prints: the ``nightly`` and ``replay`` commands report what it
+returns.
 """
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 
 from imu_square import __version__
 from imu_square.errors import AnalysisError, ImuSquareError
+from imu_square.json_values import json_safe
+from imu_square.monitor.alerts.send import queue_alert
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
-from imu_square.monitor.history.rows import EvaluationRow, RunRow
+from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS, EvaluationRow, RunRow
 from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
 from imu_square.monitor.verdict import design_for, iso, judge_runs, verdict
 from imu_square.units import MM_PER_MIN, URAD
@@ -42,6 +45,8 @@ class NightOutcome:
         The machine's whole history as judged now.
     result : RunResult or None
         The analysis, None for an invalid run.
+    alert : Alert or None
+        The night's alert, pending in the outbox; None when none was made.
     """
 
     run_id: int
@@ -51,6 +56,7 @@ class NightOutcome:
     record: dict
     assessment: object
     result: object = None
+    alert: object = None
 
 
 def analysis_settings(config):
@@ -114,23 +120,12 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None)
     except AnalysisError:
         pass  # too few cycles or a constant regressor: no within-night slope
     per_cycle = dict(doc["per_cycle"], drift=drift)
+    named = {f.name for f in fields(result)}  # the run's numbers the result holds by name
     return RunRow(
         **base,
+        **{name: getattr(result, name) for name in RUN_FLOAT_FIELDS if name in named},
         valid=True,
-        squareness_rad=result.squareness_rad,
-        u_squareness_rad=result.u_squareness_rad,
-        u_squareness_bootstrap_rad=result.u_squareness_bootstrap_rad,
         dof=float(result.u_squareness_dof),
-        crb_rad=result.crb_rad,
-        theta_x_rad=result.theta_x_rad,
-        theta_y_rad=result.theta_y_rad,
-        eps_c_rad=result.eps_c_rad,
-        u_eps_c_rad=result.u_eps_c_rad,
-        servo_mismatch_rad=result.servo_mismatch_rad,
-        u_servo_mismatch_rad=result.u_servo_mismatch_rad,
-        noise_density_m_s2_rthz=result.noise_density_m_s2_rthz,
-        amp_x_m_s2=result.amp_x_m_s2,
-        amp_y_m_s2=result.amp_y_m_s2,
         time_since_power_on_s=uptime,
         cycles_ccw=result.cycles_used["ccw"],
         cycles_cw=result.cycles_used["cw"],
@@ -260,8 +255,13 @@ def judge_history(config, history):
     return judge_runs(runs, baseline_row, design, anchors, earlier)
 
 
-def judge_recording(config, history, path, program=None, complete=True):
+def judge_recording(config, history, path, program=None, complete=True, alert=False):
     """Analyse, store and judge one night's recording.
+
+    The run, its verdict and, with ``alert``, the night's alert for each sink
+    are stored in one transaction: the night is in the history with its
+    pending alerts, or not at all. Send them afterwards
+    (:func:`~imu_square.monitor.alerts.send.deliver_alerts`).
 
     Parameters
     ----------
@@ -275,6 +275,8 @@ def judge_recording(config, history, path, program=None, complete=True):
         The program the monitor expects.
     complete : bool
         False when the recorder reported an incomplete recording.
+    alert : bool
+        Keep the night's alert in the outbox (a seeded past night has none).
 
     Returns
     -------
@@ -282,43 +284,51 @@ def judge_recording(config, history, path, program=None, complete=True):
     """
     recording, result, reason = analyse_recording(config, path, program, complete)
     row = run_row(config, path, recording, result, reason)
-    run_id, inserted = history.add_run(row)
-    return judge_stored(config, history, run_id, inserted, result)
+    with history.transaction():
+        run_id, inserted = history.add_run(row)
+        assessment = judge_history(config, history)
+        baseline_row = assessment.baseline_row
+        night = assessment.night_of(run_id)
+        if night.state == "stale_baseline" and baseline_row is not None and not baseline_row.stale:
+            history.mark_baseline_stale(
+                baseline_row.id, night.reason, at_ns=night.run.recorded_at_ns
+            )
+        line = verdict(assessment, night)
+        # read back when a later baseline makes this night one "of its time"
+        store_verdict(history, baseline_row, night, verdict=line, reason=night.reason)
+        record = night_record(assessment, night, line)
+        sent = None
+        if alert:
+            sent = queue_alert(
+                config.alerts,
+                history,
+                record,
+                machine_id=config.machine_id,
+                state=night.state,
+                verdict=line,
+            )
+    return NightOutcome(run_id, inserted, night.state, line, record, assessment, result, sent)
 
 
-def judge_stored(config, history, run_id, inserted=True, result=None):
-    """Judge a run already in the history, and store the verdict.
+def store_verdict(history, baseline_row, night, **notes):
+    """Store a night's verdict against the baseline it was judged by.
 
     Parameters
     ----------
-    config : MonitorConfig
-        The monitor file.
     history : History
         The open history.
-    run_id : int
-        The run.
-    inserted : bool
-        Whether the run was stored just now.
-    result : RunResult, optional
-        Its analysis, passed through to the outcome.
-
-    Returns
-    -------
-    NightOutcome
+    baseline_row : BaselineRow or None
+        The baseline.
+    night : Night
+        The judged night.
+    **notes
+        Kept with the chart's statistics.
     """
-    assessment = judge_history(config, history)
-    baseline_row = assessment.baseline_row
-    night = assessment.night_of(run_id)
-    if night.state == "stale_baseline" and baseline_row is not None and not baseline_row.stale:
-        history.mark_baseline_stale(baseline_row.id, night.reason, at_ns=night.run.recorded_at_ns)
-    line = verdict(assessment, night)
-    statistics = {} if night.chart is None else night.chart.to_json_dict()
-    # read back when a later baseline makes this night one "of its time"
-    statistics.update(verdict=line, reason=night.reason)
+    statistics = ({} if night.chart is None else night.chart.to_json_dict()) | notes
     judged = baseline_row is not None and night.state != "no_baseline"
     history.add_evaluation(
         EvaluationRow(
-            run_id=run_id,
+            run_id=night.run.id,
             baseline_id=baseline_row.id if judged else None,
             state=night.state,
             change_rad=_finite(night.change_rad),
@@ -326,8 +336,6 @@ def judge_stored(config, history, run_id, inserted=True, result=None):
             statistics=statistics,
         )
     )
-    record = night_record(assessment, night, line)
-    return NightOutcome(run_id, inserted, night.state, line, record, assessment, result)
 
 
 def night_record(assessment, night, line):
@@ -364,7 +372,7 @@ def night_record(assessment, night, line):
         "valid": run.valid,
         "invalid_reason": run.invalid_reason,
         "reason": night.reason,
-        "drift": _jsonable_drift(night.drift),
+        "drift": json_safe(night.drift or None, urad=True),
         "drift_corrected": night.drift_corrected,
         "squareness_urad": _urad(run.squareness_rad),
         "u_squareness_urad": _urad(run.u_squareness_rad),
@@ -385,19 +393,6 @@ def night_record(assessment, night, line):
     if math.isfinite(assessment.anchor_rad) and math.isfinite(night.change_rad):
         record["machine_squareness_urad"] = (assessment.anchor_rad + night.change_rad) / URAD
     return record
-
-
-def _jsonable_drift(drift):
-    """A night's drift correction with angles in µrad, or None."""
-    if not drift:
-        return None
-    out = {}
-    for k, v in drift.items():
-        if isinstance(v, float) and ("_rad" in k):
-            out[k.replace("_rad", "_urad")] = v / URAD
-        else:
-            out[k] = v
-    return out
 
 
 def _finite(x):

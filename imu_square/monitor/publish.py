@@ -1,8 +1,9 @@
 """After a night is judged: the trend chart, the report, the metrics file and the alerts.
 
-Called once the verdict is in the history, so that nothing here can lose the
-run: a sink that fails keeps its alert in the outbox (:mod:`.alerts`), and a
-figure that cannot be drawn is logged, not raised.
+Called once the night is in the history, with its alerts pending in the
+outbox, so that nothing here can lose the run: an alert that is not sent
+stays pending (:mod:`.alerts.send`), and a figure that cannot be drawn is
+logged, not raised.
 """
 
 import math
@@ -125,19 +126,19 @@ def metrics_snapshot(assessment):
     )
 
 
-def write_night_outputs(config, outcome, out_dir, alert=True):
-    """Draw the trend chart and the report, write the metrics, send the alert.
+def write_night_outputs(config, history, outcome, out_dir):
+    """Draw the trend chart and the report, write the metrics, send the alerts.
 
     Parameters
     ----------
     config : MonitorConfig
         The monitor file.
+    history : History
+        The open history, holding the night (outside any transaction).
     outcome : NightOutcome
-        The judged night.
+        The judged night; its alert, if any, is sent with those pending.
     out_dir : Path
         Folder for the chart and the report.
-    alert : bool
-        Whether to send the night's alert (a replay of old nights does not).
 
     Returns
     -------
@@ -171,15 +172,11 @@ def write_night_outputs(config, outcome, out_dir, alert=True):
         except ImuSquareError as exc:
             logger.warning("%s", exc)
     alerts = None
-    if alert:
-        from imu_square.monitor.alerts.send import send_alerts
+    if outcome.alert is not None:
+        from imu_square.monitor.alerts.send import deliver_alerts
 
-        alerts = send_alerts(
-            config.alerts,
-            outcome.record,
-            machine_id=config.machine_id,
-            state=outcome.state,
-            verdict=outcome.verdict,
-            outbox_dir=config.outbox_dir(),
-        )
+        try:
+            alerts = deliver_alerts(config.alerts, history, config.machine_id, outcome.alert)
+        except ImuSquareError as exc:
+            logger.error("alerts not sent now (%s): they stay pending in the history", exc)
     return NightFiles(trend, report, metrics, alerts)

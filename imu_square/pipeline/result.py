@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from imu_square.json_values import json_safe
 from imu_square.pipeline.options import AnalysisOptions
 from imu_square.units import SQUARENESS_UNIT, URAD
 
@@ -226,7 +227,7 @@ class RunResult:
             "ccw": asdict(self.ccw),
             "cw": asdict(self.cw),
             "per_cycle_squareness_urad": [v / URAD for v in pc["squareness_rad"]],
-            "per_cycle": _jsonable(
+            "per_cycle": json_safe(
                 {
                     "pair": pc["pair"],
                     "squareness_ccw_urad": pc["squareness_ccw_rad"] / URAD,
@@ -241,7 +242,7 @@ class RunResult:
             "cycles_used": dict(self.cycles_used),
             "omega_rad_s": self.omega_rad_s,
             "period_s": self.period_s,
-            "quality": _jsonable(self.quality),
+            "quality": json_safe(self.quality),
             "options": asdict(self.options),
             "cutoff_hz": self.cutoff_hz,
             "cutoff_source": self.cutoff_source,
@@ -256,15 +257,3 @@ class RunResult:
 
 def _finite(x):
     return x if math.isfinite(x) else None
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple | np.ndarray):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj

@@ -1,16 +1,9 @@
 """A JSON-ready summary of a recording, for ``imu-square info``."""
 
-import math
 from collections import Counter
-from dataclasses import asdict
 
 from imu_square.io.runlog import run_outcome
-
-
-def _json_safe(value):
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+from imu_square.json_values import json_safe
 
 
 def summarize(recording):
@@ -55,7 +48,7 @@ def summarize(recording):
             "n_blocks": program.n_blocks,
             "duration_s": program.duration_s,
         },
-        "sensor": {k: _json_safe(v) for k, v in asdict(recording.sensor).items()},
+        "sensor": json_safe(recording.sensor),
         "machine_id": recording.machine_id,
         "events": dict(sorted(Counter(e.kind for e in recording.events).items())),
         "metadata": dict(recording.metadata),

@@ -16,12 +16,11 @@ JSON parser reads the body.
 
 import datetime as dt
 import json
-import math
 import re
 import uuid
 from dataclasses import dataclass, field
-from pathlib import PurePath
 
+from imu_square.json_values import json_safe
 from imu_square.validation import check_option
 
 STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
@@ -51,57 +50,12 @@ def one_line(text):
     return _CONTROL_RUN.sub(" ", text)
 
 
-def json_ready(value, where="record"):
-    """A deep copy of ``value`` that :func:`json.dumps` takes with ``allow_nan=False``.
-
-    Dicts, lists, tuples, strings, booleans, integers and None pass; floats
-    pass unless non-finite (then None); numpy scalars become Python numbers;
-    paths become strings; datetimes their ISO 8601 text.
-
-    Parameters
-    ----------
-    value : object
-        The run's record or one of its items.
-    where : str
-        Position in the record, for the message.
-
-    Returns
-    -------
-    object
-
-    Raises
-    ------
-    TypeError
-        For any other type (a programming error in the caller, not a user's).
-    """
-    if value is None or isinstance(value, bool | int | str):
-        return value
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        out = {}
-        for key, item in value.items():
-            if not isinstance(key, str):
-                raise TypeError(f"{where}: keys must be strings, got {key!r}")
-            out[key] = json_ready(item, f"{where}.{key}")
-        return out
-    if isinstance(value, list | tuple):
-        return [json_ready(item, f"{where}[{i}]") for i, item in enumerate(value)]
-    if isinstance(value, PurePath):
-        return str(value)
-    if isinstance(value, dt.datetime | dt.date):
-        return value.isoformat()
-    if hasattr(value, "item") and hasattr(value, "dtype"):  # numpy scalar
-        return json_ready(value.item(), where)
-    raise TypeError(f"{where}: cannot be sent as JSON: {type(value).__name__} {value!r}")
-
-
 @dataclass(frozen=True)
 class Alert:
     """One night's verdict as the sinks send it.
 
-    Build one with :func:`make_alert`; :meth:`from_dict` reads one back from
-    the outbox.
+    Build one with :func:`make_alert`; :func:`~imu_square.json_values.from_json`
+    reads one back from :meth:`as_dict`.
 
     Attributes
     ----------
@@ -128,43 +82,12 @@ class Alert:
 
     def as_dict(self):
         """The alert as the JSON object every sink sends (module docstring)."""
-        return {
-            "schema": ALERT_SCHEMA,
-            "alert_id": self.alert_id,
-            "machine_id": self.machine_id,
-            "state": self.state,
-            "verdict": self.verdict,
-            "created_at": self.created_at,
-            "record": self.record,
-        }
+        return {"schema": ALERT_SCHEMA, **json_safe(self)}
 
     def to_json(self, indent=None):
         """The alert as UTF-8 JSON bytes (non-ASCII kept as is)."""
         text = json.dumps(self.as_dict(), ensure_ascii=False, allow_nan=False, indent=indent)
         return text.encode("utf-8")
-
-    @classmethod
-    def from_dict(cls, d):
-        """Read back what :meth:`as_dict` wrote.
-
-        Raises
-        ------
-        ValueError
-            If ``d`` is not an alert of this schema.
-        """
-        if not isinstance(d, dict) or d.get("schema") != ALERT_SCHEMA:
-            raise ValueError(f"not an {ALERT_SCHEMA} object")
-        try:
-            return cls(
-                alert_id=str(d["alert_id"]),
-                machine_id=str(d["machine_id"]),
-                state=str(d["state"]),
-                verdict=str(d["verdict"]),
-                created_at=str(d["created_at"]),
-                record=dict(d["record"]),
-            )
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"malformed alert: {exc!r}") from None
 
     @property
     def created(self):
@@ -178,7 +101,8 @@ def make_alert(record, *, machine_id, state, verdict, now=None):
     Parameters
     ----------
     record : dict
-        The run's record (JSON-ready, see :func:`json_ready`).
+        The run's record (made JSON-safe by
+        :func:`~imu_square.json_values.json_safe`).
     machine_id : str
         The machine's id.
     state : str
@@ -200,7 +124,7 @@ def make_alert(record, *, machine_id, state, verdict, now=None):
         state=state,
         verdict=str(verdict),
         created_at=now.isoformat(timespec="microseconds"),
-        record=json_ready(record),
+        record=json_safe(record, "record"),
     )
 
 

@@ -7,8 +7,7 @@ logs. A full section::
     states = ["warning", "alarm", "invalid", "stale_baseline"]  # default of every sink but the log
     attempts = 4          # tries per sink and alert, the first included
     backoff_s = 0.5       # wait before the second try; doubles each time (50-100 % jitter)
-    max_total_s = 10.0    # cap on one delivery round (the sinks run in parallel)
-    outbox = "outbox"     # pending alerts; the monitor picks a folder beside the history if absent
+    max_total_s = 10.0    # cap on one delivery round of one sink (the sinks go one after the other)
 
     [alerts.log]
     states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]
@@ -33,16 +32,19 @@ logs. A full section::
     password_env = "IMU_SQUARE_SMTP_PASSWORD"      # or password_file = "/etc/imu-square/smtp"
 
 Every sink table may also set ``name`` (letters, digits, ``_.-``), the name it
-has in outcomes, logs and outbox files; by default ``json_file``, ``webhook``
+has in outcomes, logs and the outbox; by default ``json_file``, ``webhook``
 and ``email``, numbered ``webhook-1``, ``webhook-2``... when there are several.
-Relative paths are taken from the monitor file's folder.
+Relative paths are taken from the monitor file's folder. The pending alerts
+are kept in the history (:mod:`imu_square.monitor.history.outbox`); the field
+``outbox`` of older monitor files, their folder, is read with a warning and
+not used.
 """
 
 import re
+import warnings
 from dataclasses import dataclass
-from pathlib import Path
 
-from imu_square.errors import MonitorConfigError
+from imu_square.errors import ImuSquareWarning, MonitorConfigError
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES
 from imu_square.monitor.alerts.json_file import JSON_FILE_FIELDS, json_file_from_table
 from imu_square.monitor.alerts.log_line import LOG_FIELDS, LogSink, log_from_table
@@ -72,7 +74,8 @@ class RetryPolicy:
         each wait is drawn uniformly from 50-100 % of that (jitter, so that
         many machines do not retry in step). [s]
     max_total_s : float
-        Cap on one round: no try starts, and no socket waits, past it. [s]
+        Cap on one round of one sink: no try starts, and no socket waits,
+        past it. [s]
     """
 
     attempts: int = 4
@@ -90,13 +93,10 @@ class AlertsConfig:
         The log sink first, then JSON files, webhooks and e-mails, in file order.
     retry : RetryPolicy
         Retry and time-cap settings.
-    outbox : Path or None
-        Folder of pending alerts, or None to let the monitor choose.
     """
 
     sinks: tuple = (LogSink(),)
     retry: RetryPolicy = RetryPolicy()
-    outbox: Path | None = None
 
     def sink(self, name):
         """The sink called ``name``, or None."""
@@ -153,4 +153,11 @@ def alerts_from_mapping(table, source="<monitor file>", base_dir=None):
             if any(s.name == name for s in sinks):
                 t.fail("name", "different from every other sink's name", name)
             sinks.append(build(t, name, default_states))
-    return AlertsConfig(sinks=tuple(sinks), retry=retry, outbox=top.path("outbox", default=None))
+    if top.has("outbox"):
+        warnings.warn(
+            f"{source}: [alerts] outbox is no longer used: the pending alerts are kept in "
+            "the history; remove the field",
+            ImuSquareWarning,
+            stacklevel=2,
+        )
+    return AlertsConfig(sinks=tuple(sinks), retry=retry)

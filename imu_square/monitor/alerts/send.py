@@ -1,25 +1,26 @@
-"""Sending the nightly verdict to the alert sinks, with retries and an outbox.
+"""Sending a night's alert to its sinks, through the outbox in the history.
 
-The monitor stores the run in its history first and then calls
-:func:`send_alerts`, so that no sink, however slow or broken, can block or
-lose the history write. :func:`send_alerts`:
+:func:`queue_alert` makes the night's alert and keeps it in the history's
+outbox (:mod:`imu_square.monitor.history.outbox`), one row for each sink
+whose ``states`` hold tonight's state, in the transaction that stores the
+night's run and verdict. Once that is committed, :func:`deliver_alerts`:
 
-1. delivers what earlier runs left in the outbox (:func:`deliver_pending`);
-2. makes the alert (:func:`~imu_square.monitor.alerts.alert.make_alert`) and,
-   for each sink whose ``states`` hold tonight's state, writes it to the
-   outbox before the first try (a process killed mid-delivery loses nothing);
-3. tries the sinks in parallel, each up to ``attempts`` times with
-   exponential back-off and jitter, and never past ``max_total_s``
-   (socket timeouts are cut to the time left);
-4. removes each delivered entry; keeps one that failed for now (the next call
-   retries it); moves one that a sink refused as a configuration error (HTTP
-   4xx, refused login, bad certificate, missing secret) to ``rejected/``,
-   where it stays, logged, until :func:`deliver_pending` is called with
-   ``include_rejected=True`` after the monitor file is fixed.
+1. rejects the pending alerts of a sink that left the monitor file;
+2. takes the sinks one after the other. For each, it first delivers what
+   earlier runs left pending, oldest first, one try each, and stops at the
+   sink's first failure for now (it is evidently down); then tonight's
+   alert, up to ``attempts`` times with exponential back-off and jitter.
+   Each of the two takes at most ``max_total_s``: no try starts past it,
+   and socket timeouts are cut to the time left;
+3. records each result in the outbox: delivered; still pending (retried at
+   the next run); or rejected, when the sink refused the alert as a
+   configuration error (HTTP 4xx, refused login, bad certificate, missing
+   secret): logged, kept and not retried until it is queued again with
+   ``include_rejected=True``, once the monitor file is fixed.
 
-Each of steps 1 and 3 takes at most ``max_total_s`` (10 s by default), so one
-call takes at most twice that. Delivery is at least once: a receiver that
-must not see an alert twice dedupes on its ``alert_id``.
+Each alert is claimed in the history before a sink is tried, so that two
+monitor jobs never send it at the same moment. Delivery is at least once: a
+receiver that must not see an alert twice dedupes on its ``alert_id``.
 
 Nothing here runs a program or a shell; every configured string is used as
 data (a URL, a header value, an address, a file path).
@@ -27,14 +28,17 @@ data (a URL, a header value, an address, a file path).
 
 import random
 import time
-from concurrent.futures import ThreadPoolExecutor
+import uuid
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
-from imu_square.errors import MonitorError
+from imu_square.json_values import from_json
 from imu_square.log import logger
-from imu_square.monitor.alerts import outbox
-from imu_square.monitor.alerts.alert import DeliveryError, make_alert
+from imu_square.monitor.alerts.alert import Alert, DeliveryError, make_alert
+from imu_square.monitor.history.encoding import now_ns, ns_from_datetime
+from imu_square.monitor.history.rows import OutboxRow
+
+# What a round's result makes of an alert's row.
+_ROW_STATE = {"sent": "delivered", "pending": "pending", "rejected": "rejected"}
 
 
 @dataclass(frozen=True)
@@ -51,17 +55,15 @@ class SinkOutcome:
         The alert's state.
     status : str
         ``"sent"``; ``"skipped"`` (the sink does not take this state);
-        ``"pending"`` (failed for now, kept in the outbox and retried at the
-        next call); ``"rejected"`` (a configuration error, kept in the
-        outbox's ``rejected/`` and not retried); ``"failed"`` (not delivered
-        and the outbox could not be written either: the alert is only in the
-        log).
+        ``"pending"`` (failed for now, or held by another process: kept in
+        the outbox and retried at the next run); ``"rejected"`` (a
+        configuration error, kept in the outbox and not retried).
     attempts : int
-        Tries in this call.
+        Tries in this round.
     error : str or None
         The last failure.
-    outbox_path : str or None
-        Where the alert waits, for ``pending`` and ``rejected``.
+    outbox_id : int or None
+        The alert's row in the history's outbox, for ``pending`` and ``rejected``.
     """
 
     sink: str
@@ -70,7 +72,7 @@ class SinkOutcome:
     status: str
     attempts: int = 0
     error: str | None = None
-    outbox_path: str | None = None
+    outbox_id: int | None = None
 
     def as_dict(self):
         """The outcome as a JSON-ready dict."""
@@ -79,16 +81,16 @@ class SinkOutcome:
 
 @dataclass(frozen=True)
 class AlertReport:
-    """The result of :func:`send_alerts`.
+    """The result of :func:`deliver_alerts`.
 
     Attributes
     ----------
-    alert : Alert
+    alert : Alert or None
         Tonight's alert.
     outcomes : tuple of SinkOutcome
         Tonight's alert at each sink, in the configuration's order.
     backlog : tuple of SinkOutcome
-        Earlier alerts from the outbox tried in this call.
+        Earlier alerts from the outbox tried in this round.
     """
 
     alert: object
@@ -103,182 +105,181 @@ class AlertReport:
     def as_dict(self):
         """The report as a JSON-ready dict (for the run's ``--json`` record)."""
         return {
-            "alert_id": self.alert.alert_id,
+            "alert_id": None if self.alert is None else self.alert.alert_id,
             "delivered": self.delivered,
             "outcomes": [o.as_dict() for o in self.outcomes],
             "backlog": [o.as_dict() for o in self.backlog],
         }
 
 
-def send_alerts(config, record, *, machine_id, state, verdict, outbox_dir=None, now=None):
-    """Send tonight's verdict to every sink that takes its state (module docstring).
+def queue_alert(config, history, record, *, machine_id, state, verdict, now=None):
+    """Make a night's alert and keep it in the outbox for each sink that takes its state.
 
-    Never raises for a sink's failure: failures are logged and reported in the
-    outcomes, and the alert is kept in the outbox.
+    Call it inside the transaction that stores the night, so that the night
+    and its pending alerts land together; then :func:`deliver_alerts`.
 
     Parameters
     ----------
     config : AlertsConfig
         The ``[alerts]`` section.
+    history : History
+        The open history.
     record : dict
-        The run's record, JSON-ready (see
-        :func:`~imu_square.monitor.alerts.alert.json_ready`).
+        The night's record (made JSON-safe by
+        :func:`~imu_square.json_values.json_safe`).
     machine_id : str
         The machine's id.
     state : str
         One of :data:`~imu_square.monitor.alerts.alert.STATES`.
     verdict : str
         The one-line verdict.
-    outbox_dir : str or Path, optional
-        The outbox folder; ``config.outbox`` by default. One of them must be given.
     now : datetime, optional
         The alert's time (aware); the current time by default.
 
     Returns
     -------
-    AlertReport
+    Alert
     """
-    folder = _outbox(config, outbox_dir)
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict, now=now)
-    backlog = _safely("the outbox", deliver_pending, config, folder) or ()
-    selected = [s for s in config.sinks if state in s.states]
-    deadline = time.monotonic() + config.retry.max_total_s
-
-    def send(sink):
-        done = _safely(sink.name, _send_new, sink, alert, config.retry, deadline, folder)
-        return done or SinkOutcome(sink.name, alert.alert_id, state, "failed", error="see the log")
-
-    with ThreadPoolExecutor(max_workers=max(1, len(selected))) as pool:
-        done = dict(zip([s.name for s in selected], pool.map(send, selected), strict=True))
-    outcomes = tuple(
-        done.get(s.name) or SinkOutcome(s.name, alert.alert_id, state, "skipped")
-        for s in config.sinks
-    )
-    return AlertReport(alert=alert, outcomes=outcomes, backlog=backlog)
+    with history.transaction():
+        for sink in config.sinks:
+            if sink.kind != "log" and state in sink.states:  # the log is written when sent
+                history.add_alert(
+                    OutboxRow(
+                        machine_id=alert.machine_id,
+                        alert_id=alert.alert_id,
+                        sink=sink.name,
+                        created_at_ns=ns_from_datetime(alert.created),
+                        alert=alert.as_dict(),
+                    )
+                )
+    return alert
 
 
-def deliver_pending(config, outbox_dir=None, *, include_rejected=False):
-    """Try again what earlier calls left in the outbox, oldest first.
+def deliver_alerts(config, history, machine_id, alert=None, *, include_rejected=False, now=None):
+    """Deliver a machine's pending alerts, and tonight's ``alert`` (module docstring).
 
-    Each entry gets one try, sinks in parallel, within ``max_total_s``. A sink
-    that fails for now is not tried again in this call for its later
-    entries (they stay pending, ``attempts`` 0): it is evidently down. An
-    entry whose sink is no longer in the monitor file, or whose file cannot
-    be read, moves to ``rejected/`` with an error in the log. Entries another
-    process is delivering right now are left to it.
+    A sink's failure never raises: it is logged and reported in the
+    outcomes, and the alert stays in the outbox.
 
     Parameters
     ----------
     config : AlertsConfig
         The ``[alerts]`` section.
-    outbox_dir : str or Path, optional
-        The outbox folder; ``config.outbox`` by default.
+    history : History
+        The open history, outside any transaction.
+    machine_id : str
+        The machine whose alerts are delivered.
+    alert : Alert, optional
+        Tonight's alert, from :func:`queue_alert` (committed).
     include_rejected : bool
-        First move the rejected entries back, after the monitor file is fixed.
+        First queue the rejected alerts again, after the monitor file is fixed.
+    now : datetime, optional
+        The time of this round (aware): claims are taken from it, and a
+        claim left by a process that died runs out by it. The current time by
+        default.
 
     Returns
     -------
-    tuple of SinkOutcome
-        One per entry tried or left pending, sink by sink, oldest first.
+    AlertReport
 
     Raises
     ------
-    MonitorError
-        If the outbox folder cannot be read (a sink's failure never raises).
+    HistoryError
+        If the history cannot be read or written (the alerts stay pending).
     """
-    folder = _outbox(config, outbox_dir)
-    by_sink = {}
-    try:
-        if include_rejected:
-            moved = outbox.requeue_rejected(folder)
-            if moved:
-                logger.info("alert outbox %s: %d rejected alert(s) queued again", folder, moved)
-        for path in outbox.pending_paths(folder):
-            by_sink.setdefault(outbox.sink_of(path), []).append(path)
-    except OSError as exc:
-        raise MonitorError(f"{folder}: cannot read the alert outbox: {exc}") from None
-    if not by_sink:
-        return ()
-    deadline = time.monotonic() + config.retry.max_total_s
-    results = []
-    for name in [n for n in by_sink if config.sink(n) is None]:
-        results += [_safely(path.name, _orphan, path, name) for path in by_sink.pop(name)]
-    with ThreadPoolExecutor(max_workers=max(1, len(by_sink))) as pool:
-        jobs = [
-            pool.submit(_safely, name, _send_backlog, config.sink(name), paths, config.retry,
-                        deadline)
-            for name, paths in by_sink.items()
-        ]  # fmt: skip
-        for job in jobs:
-            results += job.result() or []
-    return tuple(r for r in results if r is not None)
-
-
-def _safely(what, function, *args):
-    """``function(*args)``, or None after logging an unexpected error: delivery never raises."""
-    try:
-        return function(*args)
-    except Exception:
-        logger.exception("alert delivery: unexpected error in %s", what)
-        return None
-
-
-def _outbox(config, outbox_dir):
-    folder = outbox_dir if outbox_dir is not None else config.outbox
-    if folder is None:
-        raise ValueError("no outbox folder: pass outbox_dir or set [alerts] outbox")
-    return Path(folder)
-
-
-def _send_new(sink, alert, retry, deadline, folder):
-    """Deliver tonight's alert to one sink; never raises."""
-    if sink.kind == "log":  # logging cannot fail in a way a retry would fix
-        sink.deliver(alert)
-        return SinkOutcome(sink.name, alert.alert_id, alert.state, "sent", attempts=1)
-    try:
-        entry = outbox.create(folder, alert, sink.name)
-    except OSError as exc:
-        entry = None
-        logger.error(
-            "alert outbox %s cannot be written (%s): trying %s anyway", folder, exc, sink.name
-        )
-    status, attempts, error = _try(sink, alert, retry, deadline, retry.attempts)
-    return _settle(sink, alert, entry, status, attempts, error)
-
-
-def _send_backlog(sink, paths, retry, deadline):
-    """Deliver one sink's pending entries, oldest first; stop at its first transient failure."""
-    results = []
-    down = None
-    for path in paths:
-        try:
-            entry = outbox.claim(path)
-        except ValueError as exc:
-            target = outbox.reject_file(path)
-            logger.error("%s; moved to %s", exc, target)
+    rounds = _Rounds(history, config.retry, now)
+    if include_rejected:
+        moved = history.requeue_rejected(machine_id)
+        if moved:
+            logger.info("alert outbox: %d rejected alert(s) of %s queued again", moved, machine_id)
+    pending = history.outbox(machine_id)
+    backlog = [rounds.orphan(r) for r in pending if config.sink(r.sink) is None]
+    outcomes = []
+    for sink in config.sinks:
+        mine = [r for r in pending if r.sink == sink.name]
+        tonight = [r for r in mine if alert is not None and r.alert_id == alert.alert_id]
+        backlog += rounds.run(sink, [r for r in mine if r not in tonight], 1)
+        if alert is None:
             continue
-        if entry is None:  # another process is delivering it
-            continue
-        alert = entry.alert
-        if down is not None:
-            outbox.release(entry)
-            results.append(
+        if alert.state not in sink.states:
+            outcomes.append(SinkOutcome(sink.name, alert.alert_id, alert.state, "skipped"))
+        elif sink.kind == "log":  # logging cannot fail in a way a retry would fix
+            sink.deliver(alert)
+            outcomes.append(SinkOutcome(sink.name, alert.alert_id, alert.state, "sent", 1))
+        else:
+            outcomes += rounds.run(sink, tonight, config.retry.attempts) or [
                 SinkOutcome(
-                    sink.name,
-                    alert.alert_id,
-                    alert.state,
-                    "pending",
-                    0,
-                    f"not tried: {sink.name} failed on an earlier alert ({down})",
-                    str(path),
+                    sink.name, alert.alert_id, alert.state, "pending", 0, "held by another process"
                 )
+            ]
+    return AlertReport(alert, tuple(outcomes), tuple(b for b in backlog if b is not None))
+
+
+class _Rounds:
+    """One call's delivery rounds: its claim token and clock, the outbox's history."""
+
+    def __init__(self, history, retry, now):
+        self.history = history
+        self.retry = retry
+        self.claim = uuid.uuid4().hex
+        self._start_ns = now_ns() if now is None else ns_from_datetime(now)
+        self._start_s = time.monotonic()
+
+    def _now_ns(self):
+        return self._start_ns + int((time.monotonic() - self._start_s) * 1e9)
+
+    def _take(self, row):
+        # A round never tries past max_total_s, so a claim twice as long outlives it.
+        at_ns = self._now_ns()
+        until_ns = at_ns + int(2e9 * self.retry.max_total_s)
+        return self.history.claim_alert(row.id, self.claim, until_ns, at_ns)
+
+    def run(self, sink, rows, max_attempts):
+        """Deliver ``rows`` to ``sink`` oldest first, in one round; stop at its first failure."""
+        deadline = time.monotonic() + self.retry.max_total_s
+        out, down = [], None
+        for row in rows:
+            alert = from_json(Alert, row.alert)
+            if down is not None:
+                error = f"not tried: {sink.name} failed on an earlier alert ({down})"
+                out.append(
+                    SinkOutcome(sink.name, row.alert_id, alert.state, "pending", 0, error, row.id)
+                )
+            elif self._take(row):  # else another process is delivering it
+                status, attempts, error = _try(sink, alert, self.retry, deadline, max_attempts)
+                out.append(self._settle(sink.name, row, alert.state, status, attempts, error))
+                if status == "pending":
+                    down = error
+        return out
+
+    def orphan(self, row):
+        """Reject an alert whose sink is no longer in the monitor file."""
+        if not self._take(row):
+            return None
+        error = f"the sink {row.sink!r} is no longer in the monitor file"
+        return self._settle(row.sink, row, row.alert["state"], "rejected", 0, error)
+
+    def _settle(self, name, row, state, status, attempts, error):
+        if not self.history.settle_alert(row.id, self.claim, _ROW_STATE[status], attempts, error):
+            logger.warning(
+                "alert outbox: the claim on alert %s for %s ran out before its result was "
+                "recorded; another run has it",
+                row.alert_id,
+                name,
             )
-            continue
-        status, attempts, error = _try(sink, alert, retry, deadline, 1)
-        results.append(_settle(sink, alert, entry, status, attempts, error))
         if status == "pending":
-            down = error
-    return results
+            logger.warning("alert sink %s: alert kept in the outbox, retried at the next run", name)
+        elif status == "rejected":
+            logger.error(
+                "alert sink %s refused the alert (a configuration error, not retried): %s; "
+                "kept in the history's outbox until the monitor file is fixed and the alert "
+                "queued again",
+                name,
+                error,
+            )
+        outbox_id = None if status == "sent" else row.id
+        return SinkOutcome(name, row.alert_id, state, status, attempts, error, outbox_id)
 
 
 def _try(sink, alert, retry, deadline, max_attempts):
@@ -323,76 +324,3 @@ def _try(sink, alert, retry, deadline, max_attempts):
             return "pending", attempts, error
         time.sleep(pause_s)
         wait_s *= 2
-
-
-def _settle(sink, alert, entry, status, attempts, error):
-    """Record the result of a round in the outbox and make the outcome; never raises."""
-    path = None if entry is None else entry.path
-    try:
-        if entry is None:
-            if status != "sent":
-                # The outbox cannot be written: the log is the last place the alert survives.
-                logger.error(
-                    "alert for %s not delivered and not kept: %s",
-                    sink.name,
-                    alert.to_json().decode("utf-8"),
-                )
-                status = "failed"
-        elif status == "sent":
-            outbox.remove(entry)
-            path = None
-        elif status == "pending":
-            outbox.update(entry, attempts, error)
-            logger.warning(
-                "alert sink %s: alert kept in %s, retried at the next run", sink.name, entry.path
-            )
-        else:
-            path = outbox.reject(entry, attempts, error)
-            logger.error(
-                "alert sink %s refused the alert (a configuration error, not retried): "
-                "%s; kept in %s until the monitor file is fixed and the outbox "
-                "re-queued",
-                sink.name,
-                error,
-                path,
-            )
-    except OSError as exc:
-        logger.error(
-            "alert outbox: cannot record the %s alert for %s in %s: %s",
-            status,
-            sink.name,
-            path,
-            exc,
-        )
-    finally:
-        if entry is not None:
-            outbox.release(entry)
-    return SinkOutcome(
-        sink.name,
-        alert.alert_id,
-        alert.state,
-        status,
-        attempts,
-        error,
-        None if path is None else str(path),
-    )
-
-
-def _orphan(path, name):
-    """Move an entry whose sink left the monitor file to ``rejected/``."""
-    try:
-        entry = outbox.claim(path)
-    except ValueError as exc:
-        logger.error("%s; moved to %s", exc, outbox.reject_file(path))
-        return None
-    if entry is None:
-        return None
-    error = f"the sink {name!r} is no longer in the monitor file"
-    try:
-        target = outbox.reject(entry, 0, error)
-    finally:
-        outbox.release(entry)
-    logger.error("alert outbox: %s; %s moved to %s", error, path.name, target)
-    return SinkOutcome(
-        name, entry.alert.alert_id, entry.alert.state, "rejected", 0, error, str(target)
-    )

@@ -22,8 +22,8 @@ How an answer is taken:
   the body, and a redirect may carry the token to another host. Put the
   final URL in the monitor file.
 - any other 4xx, a certificate that does not verify, a missing token: a
-  configuration error, not retried (the alert is kept in the outbox's
-  ``rejected/`` folder).
+  configuration error, not retried (the alert is kept in the outbox as
+  ``rejected``).
 
 HTTPS always verifies the server's certificate and host name, against the
 system's trusted CAs or, with ``ca_file``, against that bundle only.

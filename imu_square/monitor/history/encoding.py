@@ -9,11 +9,10 @@
 
 import hashlib
 import json
-import math
-from collections.abc import Mapping
 from datetime import UTC, datetime, timedelta
 
 from imu_square.errors import HistoryError, RecordingError
+from imu_square.json_values import json_safe
 
 _EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 
@@ -24,8 +23,8 @@ def canonical_json(value, name="value"):
     Parameters
     ----------
     value : object
-        Dicts, lists, tuples, text, numbers, booleans, None, numpy arrays and
-        scalars. Non-finite floats are written as null.
+        JSON values by :func:`~imu_square.json_values.json_safe`'s rules
+        (non-finite floats are written as null).
     name : str
         What ``value`` is, for the error message.
 
@@ -35,44 +34,11 @@ def canonical_json(value, name="value"):
         The JSON text; equal values give equal text.
     """
     return json.dumps(
-        json_native(value, name),
+        json_safe(value, name),
         sort_keys=True,
         separators=(",", ":"),
         ensure_ascii=True,
         allow_nan=False,
-    )
-
-
-def json_native(value, name="value"):
-    """``value`` with only JSON-native types: what it reads back as from the history.
-
-    Parameters
-    ----------
-    value : object
-        See :func:`canonical_json`.
-    name : str
-        What ``value`` is, for the error message.
-
-    Returns
-    -------
-    object
-        Dicts with text keys, lists, text, int, finite float, bool or None.
-    """
-    if value is None or isinstance(value, str | bool):
-        return value
-    if isinstance(value, int):
-        return int(value)
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, Mapping):
-        return {str(k): json_native(v, name) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_native(v, name) for v in value]
-    if hasattr(value, "tolist") and hasattr(value, "dtype"):  # numpy array or scalar
-        return json_native(value.tolist(), name)
-    raise HistoryError(
-        f"{name} must hold JSON values (dicts, lists, text, numbers), "
-        f"got a {type(value).__name__}: {value!r}"
     )
 
 

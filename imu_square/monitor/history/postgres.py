@@ -4,6 +4,9 @@ psycopg 3 is imported here only (extra ``imu-square[postgres]``), so the
 SQLite path never needs it.
 
 - The connection is in autocommit; the store's transactions are explicit.
+- Statements go to the server as written, with PostgreSQL's own ``$1``
+  parameters (psycopg's ``RawCursor``): psycopg never parses them, so a
+  literal ``%`` or ``?`` in SQL is just that.
   A reader's transaction is ``REPEATABLE READ, READ ONLY``: one snapshot.
 - ``lock_timeout`` is the busy timeout: a writer blocked by another's lock
   waits that long, then fails with one line.
@@ -72,13 +75,15 @@ class PostgresBackend:
         extra = {"application_name": "imu-square", "connect_timeout": 10}
         extra = {k: v for k, v in extra.items() if k not in params}
         try:
-            self.conn = psycopg.connect(url, autocommit=True, **extra)
+            self.conn = psycopg.connect(
+                url, autocommit=True, cursor_factory=psycopg.RawCursor, **extra
+            )
         except psycopg.Error as exc:
             raise HistoryError(
                 f"history {self.location}: cannot connect: {first_line(exc)}"
             ) from None
         try:
-            self.query("SELECT set_config('lock_timeout', ?, false)", (f"{busy_timeout_s}s",))
+            self.query("SELECT set_config('lock_timeout', $1, false)", (f"{busy_timeout_s}s",))
             self.schema = self.query("SELECT current_schema()")[0][0]
             if self.schema is None:
                 raise HistoryError(
@@ -101,9 +106,14 @@ class PostgresBackend:
 
     def _run(self, sql, params):
         try:
-            return self.conn.execute(sql.replace("?", "%s"), params)
+            return self.conn.execute(sql, params)
         except self._psycopg.Error as exc:
             raise self._error(exc) from exc
+
+    @staticmethod
+    def mark(i):
+        """The marker of the ``i``-th parameter (from 1) in a statement: ``$i``."""
+        return f"${i}"
 
     def execute(self, sql, params=()):
         """Run one statement; return the number of rows it changed."""
@@ -157,7 +167,7 @@ class PostgresBackend:
         """Column names of ``table``, in the table's order."""
         rows = self.query(
             "SELECT column_name FROM information_schema.columns "
-            "WHERE table_schema = current_schema() AND table_name = ? ORDER BY ordinal_position",
+            "WHERE table_schema = current_schema() AND table_name = $1 ORDER BY ordinal_position",
             (table,),
         )
         return [r[0] for r in rows]

@@ -1,4 +1,4 @@
-"""What one row of the monitor's history holds: a run, a baseline, an anchor, a verdict.
+"""What one row of the monitor's history holds: a run, a baseline, an anchor, a verdict, an alert.
 
 The rows are frozen dataclasses, checked and normalised when they are built,
 so that a row reads back from either backend exactly as it was stored:
@@ -9,9 +9,8 @@ so that a row reads back from either backend exactly as it was stored:
   SQLite stores NaN as NULL anyway, and -0.0 becomes 0.0;
 - text fields are UTF-8 without NUL (PostgreSQL's text refuses NUL);
 - the JSON fields (``settings``, ``quality``, ``warnings``, ``per_cycle``,
-  ``result``, ``input``, ``statistics``) hold JSON values only: numpy arrays
-  become lists, numpy scalars Python numbers, non-finite floats None, tuples
-  lists and keys text. They are stored as canonical JSON text
+  ``result``, ``input``, ``statistics``) hold JSON values only, by
+  :func:`~imu_square.json_values.json_safe`'s rules. They are stored as canonical JSON text
   (:func:`~imu_square.monitor.history.encoding.canonical_json`), byte-identical
   whichever backend or process wrote them. Treat them as read-only.
 
@@ -25,7 +24,8 @@ from dataclasses import dataclass, field
 
 from imu_square import __version__
 from imu_square.errors import HistoryError
-from imu_square.monitor.history.encoding import datetime_from_ns, json_native, settings_hash
+from imu_square.json_values import JsonValueError, json_safe
+from imu_square.monitor.history.encoding import datetime_from_ns, settings_hash
 from imu_square.validation import (
     check_bool,
     check_int,
@@ -40,6 +40,8 @@ from imu_square.validation import (
 EVALUATION_STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
 #: The reference methods an anchor can come from.
 ANCHOR_METHODS = ("ballbar", "diagonals")
+#: What became of an alert at a sink: waiting, delivered, refused as a configuration error.
+OUTBOX_STATES = ("pending", "delivered", "rejected")
 
 _SHA256 = re.compile(r"[0-9a-f]{64}")
 
@@ -119,7 +121,13 @@ def _bool(row, name):
 
 
 def _json(row, name, kind):
-    value = json_native(getattr(row, name), _where(row, name))
+    try:
+        value = json_safe(getattr(row, name), _where(row, name))
+    except JsonValueError as exc:
+        raise HistoryError(
+            f"{_where(row, name)} must hold JSON values (dicts, lists, text, numbers), "
+            f"got a {type(exc.value).__name__}: {exc.value!r}"
+        ) from None
     if not isinstance(value, kind):
         raise HistoryError(
             f"{_where(row, name)} must be a JSON {kind.__name__}, got {type(value).__name__}"
@@ -301,11 +309,6 @@ class RunRow:
     def recorded_at(self):
         """When the recording started (aware UTC datetime, or None)."""
         return datetime_from_ns(self.recorded_at_ns)
-
-    @property
-    def analysed_at(self):
-        """When the run was analysed (aware UTC datetime, or None)."""
-        return datetime_from_ns(self.analysed_at_ns)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -505,3 +508,55 @@ class EvaluationRow:
         _float(self, "u_change_rad")
         _json(self, "statistics", dict)
         _int(self, "created_at_ns")
+
+
+@dataclass(frozen=True, kw_only=True)
+class OutboxRow:
+    """One alert for one sink, kept in the outbox until it is delivered.
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    machine_id : str
+        The machine.
+    alert_id : str
+        The alert's id, the same in every sink and on every try (receivers dedupe on it).
+    sink : str
+        The sink's name in the monitor file.
+    created_at_ns : int
+        When the alert was made: pending alerts are delivered oldest first. [ns]
+    alert : dict
+        The alert as every sink sends it
+        (:meth:`~imu_square.monitor.alerts.alert.Alert.as_dict`).
+    state : str
+        One of :data:`OUTBOX_STATES`: ``rejected`` is a configuration error,
+        kept but not retried.
+    attempts : int
+        Tries so far, over every delivery round.
+    last_error : str or None
+        The last failure.
+    claimed_by : str or None
+        The delivery round that holds the alert now.
+    claimed_until_ns : int or None
+        When that claim runs out: then another round may take the alert
+        (its process died mid-delivery). [ns]
+    updated_at_ns : int or None
+        When the row last changed; stamped by the store. [ns]
+    """
+
+    id: int | None = None
+    machine_id: str
+    alert_id: str
+    sink: str
+    created_at_ns: int
+    alert: dict
+    state: str = "pending"
+    attempts: int = 0
+    last_error: str | None = None
+    claimed_by: str | None = None
+    claimed_until_ns: int | None = None
+    updated_at_ns: int | None = None
+
+    def __post_init__(self):
+        check_option("OutboxRow.state", self.state, OUTBOX_STATES)

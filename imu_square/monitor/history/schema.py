@@ -20,7 +20,9 @@ Versions:
 1. runs, baselines (and the runs each was set from), anchors;
 2. the monitor's verdicts (``evaluations``) and the thermal context of a run
    that the drift regression reads (temperatures, time since power-on);
-3. each baseline's alarm design, computed once when it is first needed.
+3. each baseline's alarm design, computed once when it is first needed;
+4. the alert outbox: each night's alert for each sink, kept until delivered
+   (or rejected), written with the night's run and verdict.
 """
 
 from dataclasses import dataclass
@@ -28,6 +30,7 @@ from dataclasses import dataclass
 from imu_square import __version__
 from imu_square.errors import HistoryError
 from imu_square.monitor.history.encoding import first_line, now_ns
+from imu_square.monitor.history.sql import Params
 
 _ID = {
     "sqlite": "INTEGER PRIMARY KEY",
@@ -180,11 +183,33 @@ MIGRATIONS = (
         "the alarm design of each baseline",
         ("ALTER TABLE baselines ADD COLUMN alarm_design_json TEXT NOT NULL DEFAULT '{}'",),
     ),
+    Migration(
+        4,
+        "the alert outbox",
+        (
+            """CREATE TABLE outbox (
+                id {id},
+                machine_id TEXT NOT NULL,
+                alert_id TEXT NOT NULL,
+                sink TEXT NOT NULL,
+                created_at_ns BIGINT NOT NULL,
+                alert_json TEXT NOT NULL,
+                state TEXT NOT NULL CHECK (state IN ('pending', 'delivered', 'rejected')),
+                attempts INTEGER NOT NULL,
+                last_error TEXT,
+                claimed_by TEXT,
+                claimed_until_ns BIGINT,
+                updated_at_ns BIGINT NOT NULL,
+                CONSTRAINT outbox_alert_sink UNIQUE (alert_id, sink)
+            )""",
+            "CREATE INDEX outbox_machine_state ON outbox (machine_id, state, created_at_ns)",
+        ),
+    ),
 )
 
 #: The tables a history holds.
 TABLES = frozenset(
-    {"schema_version", "runs", "baselines", "baseline_runs", "anchors", "evaluations"}
+    {"schema_version", "runs", "baselines", "baseline_runs", "anchors", "evaluations", "outbox"}
 )
 
 
@@ -252,10 +277,12 @@ def migrate(backend, target=None):
             try:
                 for statement in m.sql(backend.name):
                     backend.execute(statement)
+                p = Params(backend.mark)
+                values = p.list((m.version, m.description, now_ns(), __version__))
                 backend.execute(
                     "INSERT INTO schema_version "
-                    "(version, description, applied_at_ns, software_version) VALUES (?, ?, ?, ?)",
-                    (m.version, m.description, now_ns(), __version__),
+                    f"(version, description, applied_at_ns, software_version) VALUES ({values})",
+                    p.values,
                 )
             except HistoryError as exc:
                 cause = exc.__cause__ or exc

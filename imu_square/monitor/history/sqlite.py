@@ -21,6 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from imu_square.errors import HistoryError
+from imu_square.io.atomic import fsync_dir
 from imu_square.monitor.history.encoding import first_line
 
 #: RETURNING needs SQLite 3.35.
@@ -109,6 +110,11 @@ class SqliteBackend:
         else:
             why = text
         return HistoryError(f"history {self.location}: {why}")
+
+    @staticmethod
+    def mark(i):
+        """The marker of the ``i``-th parameter (from 1) in a statement: sqlite3's ``?``."""
+        return "?"
 
     def execute(self, sql, params=()):
         """Run one statement; return the number of rows it changed."""
@@ -219,7 +225,7 @@ class SqliteBackend:
             with open(tmp, "rb") as f:
                 os.fsync(f.fileno())
             os.replace(tmp, dest)
-            _fsync_dir(dest.parent)
+            fsync_dir(dest.parent)
         except (sqlite3.Error, OSError) as exc:
             tmp.unlink(missing_ok=True)
             raise HistoryError(
@@ -230,11 +236,3 @@ class SqliteBackend:
     def close(self):
         """Close the connection (the last one to close checkpoints the WAL)."""
         self.conn.close()
-
-
-def _fsync_dir(folder):
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)

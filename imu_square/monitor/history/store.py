@@ -27,11 +27,9 @@ opens its own. Processes may write the same history at once: a writer waits
 for another's transaction (up to ``busy_timeout_s``) rather than failing.
 """
 
-import json
 import os
 import re
 from contextlib import contextmanager, nullcontext
-from dataclasses import fields
 from datetime import datetime
 from pathlib import Path
 
@@ -46,13 +44,16 @@ from imu_square.monitor.history.encoding import (
     ns_from_datetime,
     settings_hash,
 )
+from imu_square.monitor.history.outbox import OUTBOX, Outbox
 from imu_square.monitor.history.rows import (
     EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
     EvaluationRow,
+    OutboxRow,
     RunRow,
 )
+from imu_square.monitor.history.sql import Params, Table
 
 __all__ = [
     "EVALUATION_STATES",
@@ -60,6 +61,7 @@ __all__ = [
     "BaselineRow",
     "EvaluationRow",
     "History",
+    "OutboxRow",
     "RunRow",
     "datetime_from_ns",
     "default_history_path",
@@ -74,33 +76,13 @@ BUSY_TIMEOUT_S = 60.0
 
 _URL = re.compile(r"^([A-Za-z][A-Za-z0-9+.-]*)://")
 
-# Row field -> table column, where they differ (JSON fields are stored as text).
-_RUN_JSON = {
-    "settings": "settings_json",
-    "quality": "quality_json",
-    "warnings": "warnings_json",
-    "per_cycle": "per_cycle_json",
-    "result": "result_json",
-}
-_RUN_FIELDS = [f.name for f in fields(RunRow)]
-_RUN_COLUMNS = [_RUN_JSON.get(n, n) for n in _RUN_FIELDS]
-_BASELINE_JSON = {"alarm_design": "alarm_design_json"}
-_BASELINE_FIELDS = [f.name for f in fields(BaselineRow) if f.name != "run_ids"]
-_BASELINE_COLUMNS = [_BASELINE_JSON.get(n, n) for n in _BASELINE_FIELDS]
-_ANCHOR_JSON = {"input": "input_json"}
-_ANCHOR_FIELDS = [f.name for f in fields(AnchorRow)]
-_ANCHOR_COLUMNS = [_ANCHOR_JSON.get(n, n) for n in _ANCHOR_FIELDS]
-_EVALUATION_JSON = {"statistics": "statistics_json"}
-_EVALUATION_FIELDS = [f.name for f in fields(EvaluationRow)]
-_EVALUATION_COLUMNS = [_EVALUATION_JSON.get(n, n) for n in _EVALUATION_FIELDS]
-
+RUNS = Table("runs", RunRow)
+BASELINES = Table("baselines", BaselineRow, skip=("run_ids",))  # in baseline_runs
+ANCHORS = Table("anchors", AnchorRow)
+EVALUATIONS = Table("evaluations", EvaluationRow)
 #: Every table's columns as this module reads and writes them.
-COLUMNS = {
-    "runs": _RUN_COLUMNS,
-    "baselines": _BASELINE_COLUMNS,
+COLUMNS = {t.name: t.columns for t in (RUNS, BASELINES, ANCHORS, EVALUATIONS, OUTBOX)} | {
     "baseline_runs": ["baseline_id", "run_id"],
-    "anchors": _ANCHOR_COLUMNS,
-    "evaluations": _EVALUATION_COLUMNS,
     "schema_version": ["version", "description", "applied_at_ns", "software_version"],
 }
 
@@ -181,11 +163,13 @@ def _ns(name, value):
     raise HistoryError(f"{name} must be integer nanoseconds or an aware datetime, got {value!r}")
 
 
-def _marks(n):
-    return ", ".join("?" * n)
+def _window(p, column, since, until):
+    """The conditions of the half-open time range ``since <= column < until`` (None: open)."""
+    since, until = _ns("since", since), _ns("until", until)
+    return [f"{column} {op} {p(t)}" for op, t in ((">=", since), ("<", until)) if t is not None]
 
 
-class History:
+class History(Outbox):
     """An open history; see the module's docstring. Made by :func:`open_history`.
 
     Attributes
@@ -260,6 +244,32 @@ class History:
     def _read(self):
         return nullcontext() if self._depth else self._conn.transaction(write=False)
 
+    # --- SQL through the tables' converters ---
+
+    def _params(self):
+        return Params(self._conn.mark)
+
+    def _insert(self, table, values, conflict=""):
+        """Insert a row's ``values`` (by column): ``[(id,)]``, or [] if ``conflict`` skipped it."""
+        p = self._params()
+        return self._conn.query(
+            f"INSERT INTO {table.name} ({', '.join(values)}) VALUES ({p.list(values.values())}) "
+            f"{conflict} RETURNING id",
+            p.values,
+        )
+
+    def _select(self, table, where, p, order="id", join=""):
+        """The column values of the rows of ``table`` (joined with ``join``) matching ``where``."""
+        columns = ", ".join(f"{table.name}.{c}" for c in table.columns)
+        return self._conn.query(
+            f"SELECT {columns} FROM {table.name} {join} WHERE {where} ORDER BY {order}", p.values
+        )
+
+    def _require(self, table, row_id, what):
+        p = self._params()
+        if not self._conn.query(f"SELECT 1 FROM {table} WHERE id = {p(row_id)}", p.values):
+            raise HistoryError(f"history {self.location}: no {what} {row_id!r}")
+
     # --- runs ---
 
     def add_run(self, row):
@@ -280,53 +290,32 @@ class History:
         """
         if not isinstance(row, RunRow):
             raise HistoryError(f"add_run needs a RunRow, got {type(row).__name__}")
-        values = []
-        for name in _RUN_FIELDS:
-            value = getattr(row, name)
-            if name == "analysed_at_ns" and value is None:
-                value = now_ns()
-            elif name in _RUN_JSON:
-                value = canonical_json(value, f"RunRow.{name}")
-            values.append(value)
-        columns = _RUN_COLUMNS[1:]
+        values = RUNS.values(row, stamp="analysed_at_ns")
         with self._write():
-            got = self._conn.query(
-                f"INSERT INTO runs ({', '.join(columns)}) VALUES ({_marks(len(columns))}) "
-                "ON CONFLICT (machine_id, recording_sha256, settings_hash) DO NOTHING "
-                "RETURNING id",
-                values[1:],
+            got = self._insert(
+                RUNS, values, "ON CONFLICT (machine_id, recording_sha256, settings_hash) DO NOTHING"
             )
             if got:
                 logger.debug("history %s: run %d stored", self.location, got[0][0])
                 return got[0][0], True
+            p = self._params()
             got = self._conn.query(
-                "SELECT id FROM runs WHERE machine_id = ? AND recording_sha256 = ? "
-                "AND settings_hash = ?",
-                (row.machine_id, row.recording_sha256, row.settings_hash),
+                f"SELECT id FROM runs WHERE machine_id = {p(row.machine_id)} AND "
+                f"recording_sha256 = {p(row.recording_sha256)} AND "
+                f"settings_hash = {p(row.settings_hash)}",
+                p.values,
             )
         logger.debug("history %s: run %d was already there", self.location, got[0][0])
         return got[0][0], False
 
-    def _select_runs(self, where, params, order=True):
-        sql = f"SELECT {', '.join(_RUN_COLUMNS)} FROM runs WHERE {where}"
-        if order:
-            sql += " ORDER BY recorded_at_ns IS NULL, recorded_at_ns, id"
-        return [self._run_row(r) for r in self._conn.query(sql, params)]
-
-    @staticmethod
-    def _run_row(values):
-        kw = {}
-        for name, value in zip(_RUN_FIELDS, values, strict=True):
-            if name in _RUN_JSON:
-                value = json.loads(value)
-            elif name == "valid":
-                value = bool(value)
-            kw[name] = value
-        return RunRow(**kw)
+    def _select_runs(self, where, p):
+        order = "recorded_at_ns IS NULL, recorded_at_ns, id"
+        return [RUNS.read(r) for r in self._select(RUNS, where, p, order)]
 
     def run(self, run_id):
         """The run with id ``run_id``; raise if there is none."""
-        rows = self._select_runs("id = ?", (run_id,), order=False)
+        p = self._params()
+        rows = self._select_runs(f"id = {p(run_id)}", p)
         if not rows:
             raise HistoryError(f"history {self.location}: no run {run_id!r}")
         return rows[0]
@@ -347,10 +336,11 @@ class History:
         -------
         RunRow or None
         """
+        p = self._params()
         rows = self._select_runs(
-            "machine_id = ? AND recording_sha256 = ? AND settings_hash = ?",
-            (machine_id, recording_sha256.lower(), settings_hash.lower()),
-            order=False,
+            f"machine_id = {p(machine_id)} AND recording_sha256 = {p(recording_sha256.lower())} "
+            f"AND settings_hash = {p(settings_hash.lower())}",
+            p,
         )
         return rows[0] if rows else None
 
@@ -370,12 +360,11 @@ class History:
         -------
         set of str
         """
-        sql = "SELECT recording_sha256 FROM runs WHERE machine_id = ?"
-        params = [machine_id]
+        p = self._params()
+        sql = f"SELECT recording_sha256 FROM runs WHERE machine_id = {p(machine_id)}"
         if settings_hash is not None:
-            sql += " AND settings_hash = ?"
-            params.append(settings_hash)
-        return {r[0] for r in self._conn.query(sql, params)}
+            sql += f" AND settings_hash = {p(settings_hash)}"
+        return {r[0] for r in self._conn.query(sql, p.values)}
 
     def runs(self, machine_id, since=None, until=None, valid_only=False, settings_hash=None):
         """A machine's runs in recording-time order (runs of unknown time last).
@@ -396,21 +385,13 @@ class History:
         -------
         list of RunRow
         """
-        where, params = ["machine_id = ?"], [machine_id]
-        since, until = _ns("since", since), _ns("until", until)
-        if since is not None:
-            where.append("recorded_at_ns >= ?")
-            params.append(since)
-        if until is not None:
-            where.append("recorded_at_ns < ?")
-            params.append(until)
+        p = self._params()
+        where = [f"machine_id = {p(machine_id)}", *_window(p, "recorded_at_ns", since, until)]
         if valid_only:
-            where.append("valid = ?")
-            params.append(True)
+            where.append(f"valid = {p(True)}")
         if settings_hash is not None:
-            where.append("settings_hash = ?")
-            params.append(settings_hash)
-        return self._select_runs(" AND ".join(where), params)
+            where.append(f"settings_hash = {p(settings_hash)}")
+        return self._select_runs(" AND ".join(where), p)
 
     def machines(self):
         """The machine ids with a run or a baseline, sorted."""
@@ -443,12 +424,13 @@ class History:
         if row.stale:
             raise HistoryError("BaselineRow.stale must be False for a new baseline")
         with self._write():
+            p = self._params()
             found = {
                 r[0]: r[1:]
                 for r in self._conn.query(
                     "SELECT id, machine_id, valid, invalid_reason, settings_hash, recorded_at_ns "
-                    f"FROM runs WHERE id IN ({_marks(len(row.run_ids))})",
-                    row.run_ids,
+                    f"FROM runs WHERE id IN ({p.list(row.run_ids)})",
+                    p.values,
                 )
             }
             missing = [i for i in row.run_ids if i not in found]
@@ -485,59 +467,50 @@ class History:
                     raise HistoryError(
                         f"BaselineRow.{name} is {given!r} but the runs give {value!r}"
                     )
-            values = {n: getattr(row, n) for n in _BASELINE_FIELDS} | derived
-            if values["created_at_ns"] is None:
-                values["created_at_ns"] = now_ns()
-            values["alarm_design"] = canonical_json(row.alarm_design, "BaselineRow.alarm_design")
-            baseline_id = self._conn.query(
-                f"INSERT INTO baselines ({', '.join(_BASELINE_COLUMNS[1:])}) "
-                f"VALUES ({_marks(len(_BASELINE_COLUMNS) - 1)}) RETURNING id",
-                [values[n] for n in _BASELINE_FIELDS[1:]],
-            )[0][0]
+            values = BASELINES.values(row, stamp="created_at_ns") | derived
+            baseline_id = self._insert(BASELINES, values)[0][0]
             for run_id in row.run_ids:
+                p = self._params()
                 self._conn.execute(
-                    "INSERT INTO baseline_runs (baseline_id, run_id) VALUES (?, ?)",
-                    (baseline_id, run_id),
+                    "INSERT INTO baseline_runs (baseline_id, run_id) "
+                    f"VALUES ({p.list((baseline_id, run_id))})",
+                    p.values,
                 )
         logger.debug("history %s: baseline %d stored", self.location, baseline_id)
         return baseline_id
 
-    def _select_baselines(self, where, params):
+    def _select_baselines(self, where, p):
         with self._read():
-            rows = self._conn.query(
-                f"SELECT {', '.join(_BASELINE_COLUMNS)} FROM baselines WHERE {where} ORDER BY id",
-                params,
-            )
-            out = []
-            for values in rows:
-                kw = dict(zip(_BASELINE_FIELDS, values, strict=True))
-                kw["stale"] = bool(kw["stale"])
-                kw["alarm_design"] = json.loads(kw["alarm_design"])
-                kw["run_ids"] = tuple(
-                    r[0]
-                    for r in self._conn.query(
-                        "SELECT run_id FROM baseline_runs WHERE baseline_id = ? ORDER BY run_id",
-                        (kw["id"],),
-                    )
-                )
-                out.append(BaselineRow(**kw))
-        return out
+            rows = self._select(BASELINES, where, p)
+            return [BASELINES.read(r, run_ids=self._run_ids(r[0])) for r in rows]
+
+    def _run_ids(self, baseline_id):
+        p = self._params()
+        rows = self._conn.query(
+            f"SELECT run_id FROM baseline_runs WHERE baseline_id = {p(baseline_id)} "
+            "ORDER BY run_id",
+            p.values,
+        )
+        return tuple(r[0] for r in rows)
 
     def baseline(self, baseline_id):
         """The baseline with id ``baseline_id``; raise if there is none."""
-        rows = self._select_baselines("id = ?", (baseline_id,))
+        p = self._params()
+        rows = self._select_baselines(f"id = {p(baseline_id)}", p)
         if not rows:
             raise HistoryError(f"history {self.location}: no baseline {baseline_id!r}")
         return rows[0]
 
     def baselines(self, machine_id):
         """Every baseline of a machine, oldest first."""
-        return self._select_baselines("machine_id = ?", (machine_id,))
+        p = self._params()
+        return self._select_baselines(f"machine_id = {p(machine_id)}", p)
 
     def current_baseline(self, machine_id):
         """The machine's current baseline (its latest, stale or not), or None."""
+        p = self._params()
         rows = self._select_baselines(
-            "id = (SELECT MAX(id) FROM baselines WHERE machine_id = ?)", (machine_id,)
+            f"id = (SELECT MAX(id) FROM baselines WHERE machine_id = {p(machine_id)})", p
         )
         return rows[0] if rows else None
 
@@ -564,10 +537,12 @@ class History:
             raise HistoryError("mark_baseline_stale: reason must say why, got nothing")
         at_ns = _ns("at_ns", at_ns)
         with self._write():
+            p = self._params()
             changed = self._conn.execute(
-                "UPDATE baselines SET stale = ?, stale_reason = ?, stale_at_ns = ? "
-                "WHERE id = ? AND stale = ?",
-                (True, reason, now_ns() if at_ns is None else at_ns, baseline_id, False),
+                f"UPDATE baselines SET stale = {p(True)}, stale_reason = {p(reason)}, "
+                f"stale_at_ns = {p(now_ns() if at_ns is None else at_ns)} "
+                f"WHERE id = {p(baseline_id)} AND stale = {p(False)}",
+                p.values,
             )
             if not changed:
                 self._require("baselines", baseline_id, "baseline")
@@ -583,16 +558,14 @@ class History:
         design : dict
             :meth:`~imu_square.monitor.stats.alarms.AlarmDesign.to_json_dict`.
         """
-        text = canonical_json(design, "alarm design")
+        p = self._params()
+        sql = (
+            f"UPDATE baselines SET alarm_design_json = {p(canonical_json(design, 'alarm design'))} "
+            f"WHERE id = {p(baseline_id)}"
+        )
         with self._write():
-            if not self._conn.execute(
-                "UPDATE baselines SET alarm_design_json = ? WHERE id = ?", (text, baseline_id)
-            ):
+            if not self._conn.execute(sql, p.values):
                 self._require("baselines", baseline_id, "baseline")
-
-    def _require(self, table, row_id, what):
-        if not self._conn.query(f"SELECT 1 FROM {table} WHERE id = ?", (row_id,)):
-            raise HistoryError(f"history {self.location}: no {what} {row_id!r}")
 
     # --- anchors ---
 
@@ -611,31 +584,16 @@ class History:
         """
         if not isinstance(row, AnchorRow):
             raise HistoryError(f"add_anchor needs an AnchorRow, got {type(row).__name__}")
-        values = [getattr(row, n) for n in _ANCHOR_FIELDS]
-        values[_ANCHOR_FIELDS.index("input")] = canonical_json(row.input, "AnchorRow.input")
-        if row.created_at_ns is None:
-            values[_ANCHOR_FIELDS.index("created_at_ns")] = now_ns()
-        columns = _ANCHOR_COLUMNS[1:]
+        values = ANCHORS.values(row, stamp="created_at_ns")
         with self._write():
             self._require("baselines", row.baseline_id, "baseline")
-            return self._conn.query(
-                f"INSERT INTO anchors ({', '.join(columns)}) VALUES ({_marks(len(columns))}) "
-                "RETURNING id",
-                values[1:],
-            )[0][0]
+            return self._insert(ANCHORS, values)[0][0]
 
     def anchors(self, baseline_id):
         """A baseline's anchors, oldest first."""
-        rows = self._conn.query(
-            f"SELECT {', '.join(_ANCHOR_COLUMNS)} FROM anchors WHERE baseline_id = ? ORDER BY id",
-            (baseline_id,),
-        )
-        out = []
-        for values in rows:
-            kw = dict(zip(_ANCHOR_FIELDS, values, strict=True))
-            kw["input"] = json.loads(kw["input"])
-            out.append(AnchorRow(**kw))
-        return out
+        p = self._params()
+        rows = self._select(ANCHORS, f"baseline_id = {p(baseline_id)}", p)
+        return [ANCHORS.read(r) for r in rows]
 
     # --- evaluations ---
 
@@ -657,21 +615,18 @@ class History:
         """
         if not isinstance(row, EvaluationRow):
             raise HistoryError(f"add_evaluation needs an EvaluationRow, got {type(row).__name__}")
-        values = [getattr(row, n) for n in _EVALUATION_FIELDS]
-        values[_EVALUATION_FIELDS.index("statistics")] = canonical_json(
-            row.statistics, "EvaluationRow.statistics"
-        )
-        if row.created_at_ns is None:
-            values[_EVALUATION_FIELDS.index("created_at_ns")] = now_ns()
-        columns = _EVALUATION_COLUMNS[1:]
+        values = EVALUATIONS.values(row, stamp="created_at_ns")
         target = (
             "(run_id) WHERE baseline_id IS NULL"
             if row.baseline_id is None
             else "(run_id, baseline_id) WHERE baseline_id IS NOT NULL"
         )
-        updates = ", ".join(f"{c} = excluded.{c}" for c in columns)
+        updates = ", ".join(f"{c} = excluded.{c}" for c in values)
         with self._write():
-            run = self._conn.query("SELECT machine_id, valid FROM runs WHERE id = ?", (row.run_id,))
+            p = self._params()
+            run = self._conn.query(
+                f"SELECT machine_id, valid FROM runs WHERE id = {p(row.run_id)}", p.values
+            )
             if not run:
                 raise HistoryError(f"history {self.location}: no run {row.run_id!r}")
             if not run[0][1] and row.state != "invalid":
@@ -680,8 +635,9 @@ class History:
                     f"got {row.state!r}"
                 )
             if row.baseline_id is not None:
+                p = self._params()
                 base = self._conn.query(
-                    "SELECT machine_id FROM baselines WHERE id = ?", (row.baseline_id,)
+                    f"SELECT machine_id FROM baselines WHERE id = {p(row.baseline_id)}", p.values
                 )
                 if not base:
                     raise HistoryError(f"history {self.location}: no baseline {row.baseline_id!r}")
@@ -690,25 +646,19 @@ class History:
                         f"EvaluationRow: run {row.run_id} is of machine {run[0][0]!r} but "
                         f"baseline {row.baseline_id} of {base[0][0]!r}"
                     )
-            return self._conn.query(
-                f"INSERT INTO evaluations ({', '.join(columns)}) VALUES ({_marks(len(columns))}) "
-                f"ON CONFLICT {target} DO UPDATE SET {updates} RETURNING id",
-                values[1:],
+            return self._insert(
+                EVALUATIONS, values, f"ON CONFLICT {target} DO UPDATE SET {updates}"
             )[0][0]
 
-    def _select_evaluations(self, where, params):
-        cols = ", ".join(f"e.{c}" for c in _EVALUATION_COLUMNS)
-        rows = self._conn.query(
-            f"SELECT {cols} FROM evaluations e JOIN runs r ON r.id = e.run_id WHERE {where} "
-            "ORDER BY r.recorded_at_ns IS NULL, r.recorded_at_ns, r.id, e.id",
-            params,
+    def _select_evaluations(self, where, p):
+        rows = self._select(
+            EVALUATIONS,
+            where,
+            p,
+            "runs.recorded_at_ns IS NULL, runs.recorded_at_ns, runs.id, evaluations.id",
+            "JOIN runs ON runs.id = evaluations.run_id",
         )
-        out = []
-        for values in rows:
-            kw = dict(zip(_EVALUATION_FIELDS, values, strict=True))
-            kw["statistics"] = json.loads(kw["statistics"])
-            out.append(EvaluationRow(**kw))
-        return out
+        return [EVALUATIONS.read(r) for r in rows]
 
     def evaluations(self, machine_id, since=None, until=None, baseline_id=None):
         """A machine's verdicts in the recording-time order of their runs.
@@ -726,27 +676,19 @@ class History:
         -------
         list of EvaluationRow
         """
-        where, params = ["r.machine_id = ?"], [machine_id]
-        since, until = _ns("since", since), _ns("until", until)
-        if since is not None:
-            where.append("r.recorded_at_ns >= ?")
-            params.append(since)
-        if until is not None:
-            where.append("r.recorded_at_ns < ?")
-            params.append(until)
+        p = self._params()
+        where = [f"runs.machine_id = {p(machine_id)}"]
+        where += _window(p, "runs.recorded_at_ns", since, until)
         if baseline_id is not None:
-            where.append("e.baseline_id = ?")
-            params.append(baseline_id)
-        return self._select_evaluations(" AND ".join(where), params)
+            where.append(f"evaluations.baseline_id = {p(baseline_id)}")
+        return self._select_evaluations(" AND ".join(where), p)
 
     def evaluation(self, run_id, baseline_id=None):
         """The verdict on a run against a baseline (None: judged without one), or None."""
-        if baseline_id is None:
-            rows = self._select_evaluations("e.run_id = ? AND e.baseline_id IS NULL", (run_id,))
-        else:
-            rows = self._select_evaluations(
-                "e.run_id = ? AND e.baseline_id = ?", (run_id, baseline_id)
-            )
+        p = self._params()
+        where = f"evaluations.run_id = {p(run_id)} AND evaluations.baseline_id "
+        where += "IS NULL" if baseline_id is None else f"= {p(baseline_id)}"
+        rows = self._select_evaluations(where, p)
         return rows[0] if rows else None
 
     # --- maintenance ---

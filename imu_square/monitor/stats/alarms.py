@@ -107,13 +107,14 @@ References
 """
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import special, stats
 
 from imu_square.blas import one_blas_thread
 from imu_square.errors import MonitorError
+from imu_square.json_values import from_json, json_safe
 from imu_square.log import logger
 from imu_square.monitor.stats.arl import (
     Cusum,
@@ -331,33 +332,20 @@ class AlarmDesign:
 
     def to_json_dict(self):
         """The design as JSON-ready values (angles in µrad = µm/m, ``inf`` as None)."""
-        out = {
-            "arl0_nights": self.arl0_nights,
-            "false_alarms_per_year": NIGHTS_PER_YEAR / self.arl0_nights,
-            "sigma_urad": self.sigma_rad / URAD,
-            "step_urad": self.step_rad / URAD,
-            "step_sd": self.step_sd,
-            "nu": self.nu,
-            "baseline_sd_ratio": self.baseline_sd_ratio,
-            "shares": list(self.shares),
-            "overlap": self.overlap,
-            "warning_fraction": self.warning_fraction,
-            "warning_overlap": self.warning_overlap,
-            "ramp_urad": self.ramp_rad / URAD,
-            "ramp_nights": self.ramp_nights,
-        }
-        for chart in self.charts:
-            out[chart.name] = _json_floats(
-                {f.name: getattr(chart, f.name) for f in fields(chart) if f.name != "name"}
-            )
-        out["check"] = _json_floats(
-            {f.name: getattr(self.check, f.name) for f in fields(self.check)}
-        )
-        out["check"]["false_alarms_per_year"] = NIGHTS_PER_YEAR / self.check.arl0
-        out["check"]["u_false_alarms_per_year"] = (
+        d = json_safe(self, urad=True)
+        for name in CHARTS:
+            del d[name]["name"]  # the chart's key names it
+        d["check"]["false_alarms_per_year"] = NIGHTS_PER_YEAR / self.check.arl0
+        d["check"]["u_false_alarms_per_year"] = (
             NIGHTS_PER_YEAR * self.check.u_arl0 / self.check.arl0**2
         )
-        return out
+        return {
+            "arl0_nights": d.pop("arl0_nights"),
+            "false_alarms_per_year": NIGHTS_PER_YEAR / self.arl0_nights,
+            "sigma_urad": d.pop("sigma_urad"),
+            "step_urad": d.pop("step_urad"),
+            "step_sd": self.step_sd,
+        } | d
 
     @classmethod
     def from_json_dict(cls, data):
@@ -373,32 +361,10 @@ class AlarmDesign:
         AlarmDesign
         """
         try:
-            charts = {
-                name: ChartDesign(name=name, **_from_json_floats(data[name])) for name in CHARTS
-            }
-            return cls(
-                arl0_nights=float(data["arl0_nights"]),
-                sigma_rad=float(data["sigma_urad"]) * URAD,
-                step_rad=float(data["step_urad"]) * URAD,
-                nu=None if data["nu"] is None else float(data["nu"]),
-                baseline_sd_ratio=float(data["baseline_sd_ratio"]),
-                shares=tuple(float(s) for s in data["shares"]),
-                overlap=float(data["overlap"]),
-                warning_fraction=float(data["warning_fraction"]),
-                warning_overlap=float(data["warning_overlap"]),
-                ramp_rad=float(data["ramp_urad"]) * URAD,
-                ramp_nights=int(data["ramp_nights"]),
-                check=SchemeCheck(
-                    **{
-                        f.name: _from_json_floats(data["check"])[f.name]
-                        for f in fields(SchemeCheck)
-                    }
-                ),
-                **charts,
-            )
+            return from_json(cls, data | {c: data[c] | {"name": c} for c in CHARTS}, urad=True)
         except KeyError as exc:
             raise MonitorError(f"alarm design: the field {exc.args[0]!r} is missing") from exc
-        except (TypeError, ValueError) as exc:
+        except (AttributeError, TypeError, ValueError) as exc:
             raise MonitorError(f"alarm design: a field holds a wrong value: {exc}") from exc
 
     def _nights(self, n):
@@ -448,20 +414,6 @@ class AlarmDesign:
                 f"less scatter per night finds it sooner."
             )
         return text
-
-
-def _json_floats(d):
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
-
-
-def _from_json_floats(d):
-    out = {}
-    for k, v in d.items():
-        if v is None and k not in ("parameter",):
-            out[k] = math.inf
-        else:
-            out[k] = v
-    return out
 
 
 def _check_nu(name, nu):
