@@ -281,7 +281,6 @@ class Recorder:
         next_flush = next_progress = next_request = time.monotonic()
         while not self.status.stop_reason:
             now = time.monotonic()
-            self.status.elapsed_s = now - self._t0
             if self._stop.is_set():
                 self.status.stop_reason = "interrupted"
                 return

@@ -56,8 +56,6 @@ class RecorderStatus:
         duration when open-ended; NaN before the trigger. [s]
     rate_hz : float
         Samples per second of host time, measured over the run. [Hz]
-    elapsed_s : float
-        Host time since the recorder started. [s]
     stop_reason : str
         ``"duration"`` or ``"done"`` (as planned), ``"interrupted"``, ``"port lost"``
         (it stayed lost), ``"board silent"`` (no samples), ``"board restarted"``,
@@ -78,7 +76,6 @@ class RecorderStatus:
     recorded_s: float = 0.0
     expected_s: float = math.nan
     rate_hz: float = math.nan
-    elapsed_s: float = 0.0
     stop_reason: str = ""
     lost_at_end: int = 0
     header: DeviceHeader | None = field(default=None, repr=False)

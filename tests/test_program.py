@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
+from program_timeline import nominal_angle, nominal_time
 
 from imu_square.cli import main
 from imu_square.errors import ProgramError
@@ -135,7 +136,7 @@ def test_block_length_counts_both_overshoots(overshoot_deg):
     assert [b.run for b in plans] == [0, 0, 1, 1, 2, 2]
     for b in plans:
         assert b.duration_s == pytest.approx(expected / p.omega_rad_s, rel=1e-14)
-        end = p.nominal_angle(b, b.t_end_s)
+        end = nominal_angle(p, b, b.t_end_s)
         assert end - b.start_angle_rad == pytest.approx(b.sign * expected, rel=1e-14)
     assert p.duration_s == pytest.approx(6 * plans[0].duration_s + 5 * 0.5, rel=1e-14)
 
@@ -193,15 +194,15 @@ def test_nominal_angle_and_time_round_trip(table, frac, block_pick):
     blocks = p.blocks()
     b = blocks[block_pick % len(blocks)]
     t = b.t_start_s + frac * b.duration_s
-    phi = p.nominal_angle(b, t)
+    phi = nominal_angle(p, b, t)
     # tolerance: a few ulp of the largest magnitude involved
     tol = 64 * np.finfo(float).eps * max(abs(t), abs(phi) / p.omega_rad_s, 1.0)
-    assert p.nominal_time(b, phi) == pytest.approx(t, abs=tol)
+    assert nominal_time(p, b, phi) == pytest.approx(t, abs=tol)
     arr = np.linspace(b.t_start_s, b.t_end_s, 7)
-    assert_allclose(p.nominal_time(b, p.nominal_angle(b, arr)), arr, atol=tol)
+    assert_allclose(nominal_time(p, b, nominal_angle(p, b, arr)), arr, atol=tol)
     # the angle moves at omega in the block's direction; each angle is computed from an
     # absolute time, so its rounding grows with omega * t, not with the block's span
-    phi0, phi1 = p.nominal_angle(b, b.t_start_s), p.nominal_angle(b, b.t_end_s)
+    phi0, phi1 = nominal_angle(p, b, b.t_start_s), nominal_angle(p, b, b.t_end_s)
     tol_phi = p.omega_rad_s * tol + 64 * np.finfo(float).eps * max(abs(phi0), abs(phi1))
     assert phi1 - phi0 == pytest.approx(b.sign * p.block_angle_rad, abs=tol_phi)
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from gcode_check import parse_nc
+from program_timeline import nominal_angle
 
 from imu_square.cli import main
 from imu_square.errors import ProgramError
@@ -49,7 +50,7 @@ def test_two_feeds_run_one_after_the_other():
     assert p.duration_s == pytest.approx(2 * fast + 2 * slow + 3 * 1.0, rel=1e-14)
     # each block starts where the previous one ended
     for a, b in itertools.pairwise(plans):
-        end = p.nominal_angle(a, a.t_end_s)
+        end = nominal_angle(p, a, a.t_end_s)
         assert b.start_angle_rad == pytest.approx(end, rel=1e-14)
 
 

@@ -102,26 +102,25 @@ _.with_effect_values
 _.axis_angle_y_to_x
 _.seqs
 
-# --- Pending: files other branches are rewriting; review these after they merge ---------
+# --- The history's rows and API --------------------------------------------------------
 
-# monitor/alerts/send.py SendOutcome.outbox_path (in as_dict by asdict).
-_.outbox_path
-# monitor/history/rows.py RunRow.software_version, cycles_ccw, cycles_cw, analysed_at.
+# monitor.history.rows: columns the converter (history/sql.Table) writes and reads by
+# dataclasses.fields(); no code reads them by name.
 _.software_version
 _.cycles_ccw
 _.cycles_cw
-_.analysed_at
-# monitor/history/schema.py latest_version; monitor/history/store.py COLUMNS,
-# schema_version, machines, baselines.
+_.analysed_at_ns
+_.claimed_by
+_.claimed_until_ns
+_.updated_at_ns
+# monitor.history: the schema's version, every table's columns and the machines of a
+# central history, for a user's own scripts (and the tests that check the schema).
 _.latest_version
 _.COLUMNS
 _.schema_version
 _.machines
-_.baselines
-# acquisition/recorder.py RecorderStatus.elapsed_s.
-_.elapsed_s
-# program/planner.py predict; program/spec.py TestProgram.nominal_angle, nominal_time
-# (the validation rework).
+# program.planner.predict: what a given program resolves, the planner's API for a
+# user's own program (plan_test chooses one).
 _.predict
-_.nominal_angle
-_.nominal_time
+# monitor.history.store.History.baselines: every baseline of a machine, oldest first.
+_.baselines

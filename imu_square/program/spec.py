@@ -322,42 +322,6 @@ class TestProgram:
                     t += block_s + self.dwell_s
         return plans
 
-    def nominal_angle(self, block, t_s):
-        """Commanded position angle at time ``t_s`` within ``block``, at constant feed.
-
-        Parameters
-        ----------
-        block : BlockPlan
-            The block.
-        t_s : float or ndarray
-            Time from the start of the first block. [s]
-
-        Returns
-        -------
-        float or ndarray
-            Position angle. [rad]
-        """
-        omega = self.feeds[block.feed] / self.radius_m
-        return block.start_angle_rad + block.sign * omega * (t_s - block.t_start_s)
-
-    def nominal_time(self, block, phi_rad):
-        """Time at which ``block`` passes position angle ``phi_rad``, at constant feed.
-
-        Parameters
-        ----------
-        block : BlockPlan
-            The block.
-        phi_rad : float or ndarray
-            Position angle, unwrapped along the block. [rad]
-
-        Returns
-        -------
-        float or ndarray
-            Time from the start of the first block. [s]
-        """
-        omega = self.feeds[block.feed] / self.radius_m
-        return block.t_start_s + block.sign * (phi_rad - block.start_angle_rad) / omega
-
     def to_mapping(self):
         """The program as a ``[program]`` table in file units (mm, mm/min, degrees)."""
         if self.n_feeds > 1:
