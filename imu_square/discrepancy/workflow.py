@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import minimize
 
+from imu_square.blas import one_blas_thread
 from imu_square.discrepancy.features import FeatureOperator
 from imu_square.discrepancy.forward import ForwardModel
 from imu_square.discrepancy.identify import Member, signature_correlations, suggest_tests
@@ -287,6 +288,7 @@ def _residual_noise(problem, recording, outcome):
     return new
 
 
+@one_blas_thread()  # many small least-squares problems (imu_square.blas)
 def find_discrepancy(recording, options=None, program=None):
     """Compare a recording with the simulator, name the missing effects, add them.
 
