@@ -93,11 +93,11 @@ def judge(config, path, capsys=None):
     return code, json.loads(out.strip().splitlines()[-1])
 
 
-def make_base(folder, nights=5):
+def make_base(folder, nights=5, sensor=SENSOR):
     """A monitor folder whose history holds a baseline of ``nights`` nights and its design."""
     (folder / "program.toml").write_text(PROGRAM.to_toml())
     (folder / "monitor.toml").write_text(MONITOR.format(program=folder / "program.toml"))
-    runs = [str(night(folder, d)) for d in range(nights)]
+    runs = [str(night(folder, d, sensor=sensor)) for d in range(nights)]
     assert main(["baseline", "set", "--config", str(folder / "monitor.toml"), *runs]) == 0
     return folder
 
