@@ -506,6 +506,7 @@ def _gaps_one(task):
                     "lost": rec.lost_samples / (rec.lost_samples + rec.n_samples),
                     "gaps": r.quality["gaps"],
                     "bridged": r.quality["gaps_bridged"],
+                    "anchored_by_one_end": sum("hides its" in w for w in r.quality["warnings"]),
                 }
             out[fraction] = row
     return out
@@ -544,6 +545,15 @@ def gaps(seeds, pool):
         failed = [r[fraction]["clear"]["error"] for r in rows if "error" in r[fraction]["clear"]]
         anywhere = [r[fraction]["anywhere"] for r in rows]
         refused = [a for a in anywhere if "error" in a and "of motion" in a["error"]]
+        judged = [a for a in anywhere if "error" not in a]
+        err_any = np.array([a["squareness_rad"] for a in judged]) - expected
+        eps_any = np.array(
+            [(a["eps_c_rad"] - truth["eps_c_rad"]) / a["u_eps_c_rad"] for a in judged]
+        )
+        anchored = [a for a in judged if a["anchored_by_one_end"]]
+        eps_anchored = np.array(
+            [(a["eps_c_rad"] - truth["eps_c_rad"]) / a["u_eps_c_rad"] for a in anchored]
+        )
         err = np.array([r["squareness_rad"] for r in ok]) - expected
         paired = np.array(
             [
@@ -575,6 +585,22 @@ def gaps(seeds, pool):
             "eps_c_error_over_u_max": float(np.max(np.abs(eps))),
             "refused_anywhere": len(refused) / len(anywhere),
             "other_failures_anywhere": sum("error" in a for a in anywhere) - len(refused),
+            "bias_anywhere_urad": float(np.mean(err_any) / URAD),
+            "se_bias_anywhere_urad": float(np.std(err_any, ddof=1) / math.sqrt(err_any.size) / URAD)
+            if err_any.size > 1
+            else float("nan"),
+            "u_over_sd_anywhere": float(
+                np.median([a["u_squareness_rad"] for a in judged]) / np.std(err_any, ddof=1)
+            )
+            if err_any.size > 1
+            else float("nan"),
+            "eps_c_error_over_u_sd_anywhere": float(np.std(eps_any, ddof=1))
+            if eps_any.size > 1
+            else float("nan"),
+            "anchored_by_one_end_anywhere": len(anchored) / len(anywhere),
+            "eps_c_error_over_u_max_anchored": float(np.max(np.abs(eps_anchored)))
+            if anchored
+            else float("nan"),
         }
         table[f"{fraction:g}"] = stats
         print(
@@ -584,6 +610,13 @@ def gaps(seeds, pool):
             f"{stats['expected_sd_change_over_sd0']:9.3f} {stats['u_over_sd']:5.2f} "
             f"{stats['eps_c_error_over_u_sd']:9.2f} {stats['refused_anywhere']:16.1%}"
             + (f"  ({stats['failed']} failed)" if stats["failed"] else "")
+        )
+        print(
+            f"        anywhere: bias {stats['bias_anywhere_urad']:+7.2f} ± "
+            f"{stats['se_bias_anywhere_urad']:.2f}, u/sd {stats['u_over_sd_anywhere']:.2f}, "
+            f"eps/u_eps sd {stats['eps_c_error_over_u_sd_anywhere']:.2f}; anchored by one end "
+            f"{stats['anchored_by_one_end_anywhere']:.1%} (largest eps error/u "
+            f"{stats['eps_c_error_over_u_max_anchored']:.2f})"
         )
     print(
         "  (CRB of the data left; sd/sd0 against the lossless sd and 1/sqrt(1 - lost); dif/sd0: "

@@ -207,6 +207,15 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
             f" ({n_bridged} short one(s) bridged, their samples left out)" if n_bridged else ""
         )
         warnings.append(f"{n_gaps} gap(s), {recording.lost_samples} samples lost{bridged}")
+    for block in seg.blocks:
+        if block.lost_end is not None:
+            label, (a, b) = block.lost_end
+            other = "stop" if label == "start" else "start"
+            warnings.append(
+                f"block {block.plan.index} ({block.direction}): a gap ({a:.2f}-{b:.2f} s) hides "
+                f"its {label} of motion; anchored by its {other} and the other blocks' length "
+                f"of motion (midpoint u {block.u_t_mid_s * 1e3:.1f} ms)"
+            )
     f0 = 1 / seg.period_s
     if filtered.cutoff_hz < MIN_CUTOFF_MARGIN * f0:
         warnings.append(

@@ -57,10 +57,16 @@ class Block:
         The program's plan of this block.
     t_start_s, t_stop_s : float
         Detected start and end of motion, from the first sample. [s]
+        Where a gap hides one of them, it is the other one minus or plus the
+        length of motion of the blocks without such a gap.
     u_t_mid_s : float
-        Standard uncertainty of the motion midpoint from the envelope noise. [s]
+        Standard uncertainty of the motion midpoint from the envelope noise
+        (and, for a block anchored by one end, from the length taken). [s]
     omega_rad_s : float
         Signed angular speed from the phase slope (+ CCW, - CW). [rad/s]
+    lost_end : tuple or None
+        ``(label, (gap_start_s, gap_end_s))`` when a gap hides the block's
+        ``"start"`` or ``"stop"`` of motion; None when both were seen.
     """
 
     plan: object
@@ -68,6 +74,7 @@ class Block:
     t_stop_s: float
     u_t_mid_s: float
     omega_rad_s: float
+    lost_end: tuple | None = None
 
     @property
     def t_mid_s(self):
@@ -515,8 +522,19 @@ def match_blocks(motion, program, events=()):
     return chosen
 
 
-def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s=(), reach_s=0.0):
-    """The block found in interval ``j``, refused unless it is a trustworthy circle.
+@dataclass(frozen=True)
+class _Ends:
+    """A block's start and stop of motion as seen, each None where a gap hides it."""
+
+    plan: object
+    t_s: tuple  # (start, stop) [s]
+    u_s: tuple  # their standard uncertainties [s]
+    gaps_s: tuple  # the gap hiding each, or None
+    omega_rad_s: float
+
+
+def measure_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s=(), reach_s=0.0):
+    """The ends of the block found in interval ``j``, refused unless it is a trustworthy circle.
 
     Parameters
     ----------
@@ -529,29 +547,28 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s
     program : TestProgram
         The program the machine ran.
     guard_s : float
-        A gap within this time of the start or stop of motion makes the anchor
-        unknown. [s]
+        A gap within this time of the start or stop of motion hides it. [s]
     gaps_s : sequence of tuple (float, float), optional
         ``(last sample before, first sample after)`` of each long gap (not
         bridged, :func:`imu_square.pipeline.filter.bridge_gaps`): one within
-        ``guard_s`` plus a tenth of a period refuses; found from the steps of
-        ``motion.t_s`` if None. [s]
+        ``guard_s`` plus a tenth of a period hides the end; found from the
+        steps of ``motion.t_s`` if None. [s]
     short_gaps_s : sequence of tuple (float, float)
         The same for each short gap: one that holds the start or stop of
-        motion refuses; those within ``reach_s`` of it widen the anchor's
-        uncertainty by their total length over sqrt(12). [s]
+        motion hides it; those within ``reach_s`` of it widen its uncertainty
+        by their total length over sqrt(12). [s]
     reach_s : float
         How far the filter carries what a short gap changes. [s]
 
     Returns
     -------
-    Block
+    _Ends
 
     Raises
     ------
     AnalysisError
-        The motion is not a circle, turns the wrong way, is cut by the
-        recording's edge, or has a gap at its start or stop.
+        The motion is not a circle, turns the wrong way, or is cut by the
+        recording's edge.
     """
     t_s, rel, env = motion.t_s, motion.rel, motion.env
     (t0, s0), (t1, s1) = motion.crossings[j]
@@ -588,28 +605,46 @@ def check_block(motion, j, plan, program, guard_s=0.0, gaps_s=None, short_gaps_s
             f"which anchors the position angle, is unknown"
         )
     spans = gap_spans(t_s) if gaps_s is None else gaps_s
-    bridged_near = []
-    for label, tc in (("start", t0), ("stop", t1)):
-        gap = _gap_near(spans, tc, guard_s + 0.1 * program.period_s) or _gap_near(
-            short_gaps_s, tc, 0.0
-        )
-        if gap is not None:
-            raise AnalysisError(
-                f"block {plan.index} ({plan.direction}): its {label} of motion at "
-                f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), so "
-                f"the motion midpoint that anchors the position angle is unknown"
-            )
-        near = [b - a for a, b in short_gaps_s if a <= tc + reach_s and b >= tc - reach_s]
-        bridged_near.append(float(sum(near)))
     # Envelope noise over its slope at each crossing, and the sampling grid
     # (an onset between two samples is placed uniformly within dt); short gaps
     # within the filter's reach move a crossing, taken as uniform over their
     # total length (over 24 runs with 3 and 10 % lost the error was 0.4 of it).
     sd = spread * level_s  # robust sd of the envelope [m/s^2]
     quant = motion.sample_step_s / np.sqrt(12)
-    u0 = np.hypot(np.hypot(sd / s0, quant), bridged_near[0] / np.sqrt(12))
-    u1 = np.hypot(np.hypot(sd / s1, quant), bridged_near[1] / np.sqrt(12))
-    return Block(plan, t0, t1, 0.5 * float(np.hypot(u0, u1)), omega)
+    hidden, u = [], []
+    for tc, slope in ((t0, s0), (t1, s1)):
+        hidden.append(
+            _gap_near(spans, tc, guard_s + 0.1 * program.period_s)
+            or _gap_near(short_gaps_s, tc, 0.0)
+        )
+        near = sum(b - a for a, b in short_gaps_s if a <= tc + reach_s and b >= tc - reach_s)
+        u.append(float(np.hypot(np.hypot(sd / slope, quant), near / np.sqrt(12))))
+    return _Ends(plan, (t0, t1), tuple(u), tuple(hidden), omega)
+
+
+def _anchored(ends, length_s, u_length_s):
+    """The block of ``ends``, a hidden end placed by the length of motion of the others."""
+    (t0, t1), (u0, u1), gaps = ends.t_s, ends.u_s, ends.gaps_s
+    lost = None
+    if gaps[0] is not None:
+        t0, u_mid, lost = t1 - length_s, float(np.hypot(u1, 0.5 * u_length_s)), ("start", gaps[0])
+    elif gaps[1] is not None:
+        t1, u_mid, lost = t0 + length_s, float(np.hypot(u0, 0.5 * u_length_s)), ("stop", gaps[1])
+    else:
+        u_mid = 0.5 * float(np.hypot(u0, u1))
+    return Block(ends.plan, t0, t1, u_mid, ends.omega_rad_s, lost)
+
+
+def _length_of_motion(seen):
+    """Mean length of motion of fully seen blocks, and its uncertainty for another block.
+
+    One block's length varies from the mean by the blocks' scatter, or, with
+    too few to show one, by the timing uncertainty of a length measured. [s]
+    """
+    lengths = np.array([e.t_s[1] - e.t_s[0] for e in seen])
+    timing = float(np.mean([u0**2 + u1**2 for u0, u1 in (e.u_s for e in seen)]))
+    scatter = float(np.var(lengths, ddof=1)) if lengths.size > 1 else 0.0
+    return float(np.mean(lengths)), float(np.sqrt(max(scatter, timing) * (1 + 1 / lengths.size)))
 
 
 def segment(
@@ -630,9 +665,10 @@ def segment(
         time from the first sample; optional.
     guard_s : float
         A gap in the samples within this time of a block's start or stop of
-        motion makes that block's anchor unknown: refused. [s]
+        motion hides it: the block is then anchored by its other end and the
+        length of motion of the blocks whose ends were both seen. [s]
     gaps_s, short_gaps_s, reach_s
-        Gaps not bridged and bridged, and the filter's reach: see :func:`check_block`.
+        Gaps not bridged and bridged, and the filter's reach: see :func:`measure_block`.
 
     Returns
     -------
@@ -642,14 +678,32 @@ def segment(
     ------
     AnalysisError
         If the data hold no circle matching the program, or a block turns the
-        wrong way, or its motion is not a circle.
+        wrong way, or its motion is not a circle, or gaps hide both ends of a
+        block's motion, or one end of every block's.
     """
     motion = find_motion(t_s, accel_xy, program)
     chosen = match_blocks(motion, program, events)
-    blocks = tuple(
-        check_block(motion, j, plan, program, guard_s, gaps_s, short_gaps_s, reach_s)
+    ends = [
+        measure_block(motion, j, plan, program, guard_s, gaps_s, short_gaps_s, reach_s)
         for plan, j in zip(program.blocks(), chosen, strict=True)
-    )
+    ]
+    seen = [e for e in ends if e.gaps_s == (None, None)]
+    for e in ends:
+        hidden = [
+            (label, tc, g)
+            for label, tc, g in zip(("start", "stop"), e.t_s, e.gaps_s, strict=True)
+            if g
+        ]
+        if len(hidden) == 2 or (hidden and not seen):
+            label, tc, gap = hidden[0]
+            why = "its stop too" if len(hidden) == 2 else "so is an end of every other block's"
+            raise AnalysisError(
+                f"block {e.plan.index} ({e.plan.direction}): its {label} of motion at "
+                f"{tc:.2f} s is next to a gap in the data ({gap[0]:.2f}-{gap[1]:.2f} s), and "
+                f"{why}, so the motion midpoint that anchors the position angle is unknown"
+            )
+    length = _length_of_motion(seen) if len(seen) < len(ends) else (0.0, 0.0)
+    blocks = tuple(_anchored(e, *length) for e in ends)
     weights = np.array([b.t_stop_s - b.t_start_s for b in blocks])
     omega = float(np.sum(np.abs([b.omega_rad_s for b in blocks]) * weights) / np.sum(weights))
     return Segmentation(
