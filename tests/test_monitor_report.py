@@ -95,6 +95,89 @@ def test_report_is_self_contained_and_renders_in_a_real_browser(machine, tmp_pat
     assert set(marks["sections"].split(",")) == set(SECTIONS), marks
 
 
+WIDTH_PROBE = """<script>
+window.addEventListener("load", () => {
+  const root = document.documentElement;
+  document.body.dataset.scrollWidth = String(root.scrollWidth);
+  document.body.dataset.clientWidth = String(root.clientWidth);
+});
+</script></body>"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("width", [1280, 390])
+def test_the_report_has_no_horizontal_overflow_on_a_screen_or_a_phone(machine, tmp_path, width):
+    # A recording under a deep archive path, whose name no line can break at a space.
+    deep = tmp_path.joinpath(*["a-shop-archive-folder-with-a-long-name"] * 4)
+    deep.mkdir(parents=True)
+    long_night = deep / ("nightly-warm-up-of-machine-m1-" + "x" * 60 + ".mcap")
+    shutil.copy(night(tmp_path, 7), long_night)
+    folder = tmp_path / "copy"
+    shutil.copytree(machine, folder)
+    _, record = judge(folder / "monitor.toml", long_night, None)
+    assert record["state"] in ("ok", "warning")  # the latest valid run, drawn in the report
+    out = tmp_path / "report.html"
+    assert main(["report", "--config", str(folder / "monitor.toml"), "-o", str(out)]) == 0
+    if CHROMIUM is None:
+        pytest.skip("no chromium to open the report (Debian package chromium; .ci/run installs it)")
+    probed = tmp_path / "probed.html"
+    probed.write_text(out.read_text(encoding="utf-8").replace("</body>", WIDTH_PROBE))
+    browser = [
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        f"--window-size={width},2000",
+        "--virtual-time-budget=10000",
+    ]
+    proc = subprocess.run(
+        [*browser, "--dump-dom", probed.as_uri()], capture_output=True, text=True, timeout=120
+    )
+    body = re.search(r"<body([^>]*)>", proc.stdout)
+    assert body, proc.stderr[-2000:]
+    marks = dict(re.findall(r'data-([a-z-]+)="([^"]*)"', body.group(1)))
+    assert int(marks["client-width"]) > 0.9 * width - 20, marks  # the window asked for
+    assert int(marks["scroll-width"]) <= int(marks["client-width"]), marks
+    # A picture to look at when this fails.
+    subprocess.run(
+        [*browser, f"--screenshot={tmp_path / 'report.png'}", out.as_uri()],
+        capture_output=True,
+        timeout=120,
+    )
+    assert (tmp_path / "report.png").stat().st_size > 10_000
+
+
+def test_a_long_figure_title_stays_inside_the_figure(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    from imu_square.io.mcap import read_mcap
+    from imu_square.pipeline.run_figure import plot_results
+    from imu_square.pipeline.squareness import AnalysisOptions, analyze
+
+    result = analyze(read_mcap(night(tmp_path, 8)), AnalysisOptions(bootstrap_n=0))
+    seen = {}
+    real_savefig = plt.Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        real_savefig(fig, *args, **kwargs)
+        box = fig._suptitle.get_window_extent(fig.canvas.get_renderer())
+        seen["inside"] = box.x0 >= 0 and box.x1 <= fig.bbox.width
+        seen["lines"] = fig._suptitle.get_text().count("\n") + 1
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plt.Figure, "savefig", savefig)
+        plot_results([result], tmp_path / "f.png", title="nightly warm-up of mill 3 " * 6)
+    assert seen["inside"]
+
+
 @pytest.mark.slow
 def test_history_table_json_plot_since_and_backup(machine, tmp_path, capsys):
     config = str(machine / "monitor.toml")

@@ -216,7 +216,7 @@ def run_single(args):
         doc["truth_expected_urad"] = expected / URAD  # old name, kept for one release
         doc["error_urad"] = error / URAD
     stem.with_suffix(".result.json").write_text(json.dumps(doc, indent=1) + "\n")
-    plot_results(results, stem.with_suffix(".png"), title=str(mcap_path))
+    plot_results(results, stem.with_suffix(".png"), title=mcap_path.name)
 
     print(f"{mcap_path}: {result.summary()}", file=sys.stderr)
     if truth is not None:

@@ -2,6 +2,7 @@
 
 import json
 import sys
+from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 
@@ -111,7 +112,7 @@ def run(args):
     if args.plot and results:
         from imu_square.pipeline.run_figure import plot_results
 
-        title = str(last_path) if len(results) == 1 else f"{len(results)} runs"
+        title = Path(last_path).name if len(results) == 1 else f"{len(results)} runs"
         plot_results(results, args.plot, convergence([r.squareness_rad for r in results]), title)
         print(f"wrote {args.plot}", file=sys.stderr)
     return status
@@ -150,7 +151,10 @@ def _run_separated(args, options, program):
         from imu_square.pipeline.run_figure import plot_results
 
         last = feeds[-1]
-        title = f"{last.source} at {last.feed_mm_per_min:g} mm/min (the last of {len(feeds)} feeds)"
+        title = (
+            f"{Path(last.source).name} at {last.feed_mm_per_min:g} mm/min "
+            f"(the last of {len(feeds)} feeds)"
+        )
         plot_results([f.result for f in feeds], args.plot, title=title)
         print(f"wrote {args.plot}", file=sys.stderr)
     return 0

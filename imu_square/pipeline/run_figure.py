@@ -108,7 +108,8 @@ def plot_results(results, path, convergence=None, title=""):
     fig.suptitle(
         f"{title or 'run'}: squareness {s:.1f} ± {u:.1f} µm/m, "
         f"servo mismatch {res.servo_mismatch_rad / URAD:.0f} µm/m, "
-        f"cycles {res.cycles_used['ccw']} CCW + {res.cycles_used['cw']} CW"
+        f"cycles {res.cycles_used['ccw']} CCW + {res.cycles_used['cw']} CW",
+        wrap=True,  # a recording's long path stays inside the figure
     )
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -20,12 +20,14 @@ from imu_square.units import URAD
 
 SECTIONS = ("verdict", "trend", "last-run", "sensor", "baseline", "alarm-design", "nights")
 _CSS = """
-body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1150px; color: #222; }
+body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1150px; color: #222;
+       padding: 0 1em; box-sizing: border-box; overflow-wrap: anywhere; }
 h1 { font-size: 1.5em; } h2 { font-size: 1.15em; border-bottom: 1px solid #ccc; }
 .verdict { font-size: 1.2em; padding: 0.7em 1em; border-radius: 6px; }
 .ok { background: #e6f4ea; } .warning { background: #fff4e0; } .alarm { background: #fde7e7; }
 .invalid, .stale_baseline, .no_baseline { background: #eee; }
-img { max-width: 100%; } table { border-collapse: collapse; font-size: 0.9em; }
+img { max-width: 100%; height: auto; } pre { white-space: pre-wrap; }
+.table { overflow-x: auto; } table { border-collapse: collapse; font-size: 0.9em; }
 td, th { border: 1px solid #ddd; padding: 0.25em 0.6em; text-align: right; }
 td.text, th.text { text-align: left; } .muted { color: #777; }
 """
@@ -78,6 +80,7 @@ def render_report(assessment, last_result=None, last_title="", now=None):
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
         f"<title>imu-square report: {_e(machine)}</title>",
         f"<style>{_CSS}</style></head><body>",
         f"<h1>Squareness monitor: machine {_e(machine)}</h1>",
@@ -96,7 +99,7 @@ def render_report(assessment, last_result=None, last_title="", now=None):
     if last_result is not None:
         from imu_square.pipeline.run_figure import plot_results
 
-        fig = _png(lambda p: plot_results([last_result], p, title=last_title))
+        fig = _png(lambda p: plot_results([last_result], p, title=Path(last_title).name))
         parts += [
             f"<p>{_e(last_title)}</p><pre>{_e(last_result.summary())}</pre>",
             f'<img alt="flipped, averaged and fitted traces of the last run" src="{fig}">',
@@ -139,7 +142,7 @@ def _baseline_html(assessment):
             (f"anchor by {a.method}", f"{a.value_rad / URAD:+.1f}{u} µm/m ({iso(a.created_at_ns)})")
         )
     body = "".join(f'<tr><th class="text">{_e(k)}</th><td>{_e(v)}</td></tr>' for k, v in rows)
-    return f"<table>{body}</table>"
+    return f'<div class="table"><table>{body}</table></div>'
 
 
 def _design_html(design):
@@ -154,7 +157,7 @@ def _design_html(design):
         ("CUSUM k, h", f"{design.cusum.parameter:.2f}, {design.cusum.limit:.2f}"),
     ]
     body = "".join(f'<tr><th class="text">{_e(k)}</th><td>{_e(v)}</td></tr>' for k, v in rows)
-    return f"<p>{_e(design.describe())}</p><table>{body}</table>"
+    return f'<p>{_e(design.describe())}</p><div class="table"><table>{body}</table></div>'
 
 
 def _nights_html(assessment, last=30):
@@ -174,7 +177,7 @@ def _nights_html(assessment, last=30):
             f"<td>{_num(sq)}</td><td>{_num(eps, '.3f')}</td>"
             f"<td class='text'>{_e(n.reason)}</td></tr>"
         )
-    return f"<table>{head}{''.join(rows)}</table>"
+    return f'<div class="table"><table>{head}{"".join(rows)}</table></div>'
 
 
 def write_report(path, text):
