@@ -15,6 +15,8 @@ from imu_square.cli import main
 
 HERE = Path(__file__).resolve().parent
 CONFIG = HERE / "config"
+# A fixed start, so that the files are the same bit for bit every time.
+START = "2023-11-14T22:13:20Z"
 
 # name: (extra arguments of `imu-square simulate`, what the recording shows)
 RECORDINGS = {
@@ -59,6 +61,8 @@ def make_all():
             str(CONFIG / "sensor_7ug_500hz.toml"),
             "-o",
             str(HERE / f"{name}.mcap"),
+            "--start-time",
+            START,
             *map(str, extra),
         ]
         code = main(argv)

@@ -91,7 +91,17 @@ def test_real_rectangle_through_import_and_analyze(tmp_path, capsys):
     cols = "t_s,ax_mps2,ay_mps2,az_mps2"
     assert (
         main(
-            ["import", str(REALDATA), "--program", str(program), "-o", str(mcap), "--columns", cols]
+            [
+                "import",
+                str(REALDATA),
+                "--program",
+                str(program),
+                "-o",
+                str(mcap),
+                "--columns",
+                cols,
+                "--relative-time",
+            ]
         )
         == 0
     )

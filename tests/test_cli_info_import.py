@@ -1,6 +1,7 @@
 """End to end through the CLI: import a CSV, inspect the MCAP, recover a cut one."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -21,6 +22,8 @@ radius_mm = 100.0
 feed_mm_per_min = 6000.0
 cycles_per_direction = 15
 """
+# The CSVs count seconds from the logger's power-on: import needs the start.
+START = "2026-09-01T02:30:00Z"
 
 
 @pytest.fixture
@@ -42,7 +45,20 @@ def _csv(tmp_path, n=2000, skip=(500, 501)):
 
 def test_import_then_info(tmp_path, program, capsys):
     out = str(tmp_path / "run.mcap")
-    code = main(["import", _csv(tmp_path), "--program", program, "-o", out, "--machine-id", "VF2"])
+    code = main(
+        [
+            "import",
+            "--start-time",
+            START,
+            _csv(tmp_path),
+            "--program",
+            program,
+            "-o",
+            out,
+            "--machine-id",
+            "VF2",
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0 and captured.out == ""
     assert captured.err.strip() == (
@@ -72,7 +88,18 @@ def test_import_then_info(tmp_path, program, capsys):
 def test_import_refuses_wrong_units_in_one_line(tmp_path, program, capsys):
     path = tmp_path / "mm.csv"
     path.write_text("time_s,accel_x,accel_y,accel_z\n0,0,0,9806\n0.001,0,0,9807\n")
-    code = main(["import", str(path), "--program", program, "-o", str(tmp_path / "x.mcap")])
+    code = main(
+        [
+            "import",
+            "--start-time",
+            START,
+            str(path),
+            "--program",
+            program,
+            "-o",
+            str(tmp_path / "x.mcap"),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1
     assert "looks like mm/s^2, but format 'imu-square' expects m/s^2; use --format klipper" in err
@@ -83,7 +110,20 @@ def test_import_refuses_wrong_units_in_one_line(tmp_path, program, capsys):
 def test_import_real_klipper_capture(tmp_path, program, capsys):
     out = str(tmp_path / "klipper.mcap")
     assert (
-        main(["import", str(KLIPPER), "--program", program, "-o", out, "--format", "klipper"]) == 0
+        main(
+            [
+                "import",
+                "--relative-time",
+                str(KLIPPER),
+                "--program",
+                program,
+                "-o",
+                out,
+                "--format",
+                "klipper",
+            ]
+        )
+        == 0
     )
     assert "imported 50 samples" in capsys.readouterr().err
     rec = read_mcap(out)
@@ -94,10 +134,26 @@ def test_import_real_klipper_capture(tmp_path, program, capsys):
 @pytest.mark.skipif(not PHONE.exists(), reason="real phone recording not available")
 def test_import_real_phone_recording_as_a_user_would(tmp_path, program, capsys):
     out = str(tmp_path / "phone.mcap")
-    assert main(["import", str(PHONE), "--program", program, "-o", out]) == 2
+    assert main(["import", "--start-time", START, str(PHONE), "--program", program, "-o", out]) == 2
     assert "--columns" in capsys.readouterr().err
     columns = "t_s,ax_mps2,ay_mps2,az_mps2"
-    assert main(["import", str(PHONE), "--program", program, "-o", out, "--columns", columns]) == 0
+    assert (
+        main(
+            [
+                "import",
+                "--start-time",
+                START,
+                str(PHONE),
+                "--program",
+                program,
+                "-o",
+                out,
+                "--columns",
+                columns,
+            ]
+        )
+        == 0
+    )
     assert "imported 3145 samples (31.368 s at 100 Hz" in capsys.readouterr().err
 
 
@@ -137,7 +193,19 @@ def test_recover_a_cut_recording(tmp_path, capsys):
 def test_installed_script_prints_json(tmp_path, program):
     out = tmp_path / "run.mcap"
     assert (
-        main(["import", _csv(tmp_path, n=300, skip=()), "--program", program, "-o", str(out)]) == 0
+        main(
+            [
+                "import",
+                "--start-time",
+                START,
+                _csv(tmp_path, n=300, skip=()),
+                "--program",
+                program,
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
     )
     script = Path(sys.executable).with_name("imu-square")
     result = subprocess.run(
@@ -168,7 +236,17 @@ def test_import_with_a_range_lets_the_analysis_see_clipping(tmp_path, capsys):
     used = {}
     for extra in ([], ["--range-g", "2"]):
         out = tmp_path / f"run{len(extra)}.mcap"
-        argv = ["import", str(csv), "--program", str(prog_path), "-o", str(out), *extra]
+        argv = [
+            "import",
+            "--start-time",
+            START,
+            str(csv),
+            "--program",
+            str(prog_path),
+            "-o",
+            str(out),
+            *extra,
+        ]
         assert main(argv) == 0
         capsys.readouterr()
         assert main(["analyze", str(out), "--json"]) == 0
@@ -183,6 +261,48 @@ def test_import_with_a_range_lets_the_analysis_see_clipping(tmp_path, capsys):
 def test_import_refuses_a_nonsense_range(tmp_path, program, capsys):
     csv = tmp_path / "x.csv"
     csv.write_text("time_s,accel_x,accel_y,accel_z\n0,0,0,9.81\n0.001,0,0,9.81\n")
-    argv = ["import", str(csv), "--program", str(program), "-o", str(tmp_path / "x.mcap")]
+    argv = [
+        "import",
+        "--start-time",
+        START,
+        str(csv),
+        "--program",
+        str(program),
+        "-o",
+        str(tmp_path / "x.mcap"),
+    ]
     assert main([*argv, "--range-g", "-1"]) == 2
     assert "--range-g must be a number > 0, got -1.0" in capsys.readouterr().err
+
+
+def test_import_takes_the_start_time_and_refuses_a_clock_since_power_on(tmp_path, program, capsys):
+    # Times from 0 are no date: stored as they are, a night would be dated 1970.
+    csv = _csv(tmp_path)
+    out = str(tmp_path / "r.mcap")
+    assert main(["import", csv, "--program", program, "-o", out]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"its times start at 0\.0+ s, which is no date .* --start-time", err)
+    assert err.count("\n") == 1 and not Path(out).exists()
+    argv = ["import", csv, "--program", program, "-o", out, "--start-time"]
+    assert main([*argv, "2026-09-01T04:30:00+02:00"]) == 0
+    assert read_mcap(out).time_ns[0] == 1_788_229_800_000_000_000  # 02:30 UTC
+    for bad, why in (
+        ("2026-09-01T02:30:00", "must say its time zone"),
+        ("1999-12-31T23:00:00Z", "must be in 2000 or later"),
+        ("yesterday", "must be a date and time like"),
+    ):
+        assert main([*argv, bad]) == 2
+        assert why in capsys.readouterr().err
+
+
+def test_import_checks_the_machine_against_the_monitor_file(tmp_path, capsys):
+    monitor = tmp_path / "monitor.toml"
+    monitor.write_text('[monitor]\nmachine_id = "mill-3"\nhistory = "h.db"\n')
+    csv, out = _csv(tmp_path), str(tmp_path / "r.mcap")
+    argv = ["import", csv, "--config", str(monitor), "-o", out, "--start-time", START]
+    assert main([*argv, "--machine-id", "mill-4"]) == 2
+    assert "--machine-id 'mill-4' is not the machine of" in capsys.readouterr().err
+    assert main(argv) == 0
+    recording = read_mcap(out)
+    assert recording.machine_id == "mill-3"
+    assert recording.program.radius_m == pytest.approx(0.1)  # the monitor's: the paper's test

@@ -61,7 +61,7 @@ def test_imu_square_format_keeps_times_exact(tmp_path):
 def test_gaps_become_events_and_sequence_jumps_never_samples(tmp_path):
     rows = level_rows(n=100, skip={10, 11, 12, 50})  # 3 lost, then 1 lost
     path = write(tmp_path, "\n".join([HEADER, *rows]))
-    rec = read_csv(path, None)
+    rec = read_csv(path, None, relative_time=True)
     assert rec.n_samples == 96 and rec.dt_ns == 1_000_000
     assert rec.gaps() == [(10, 3), (47, 1)]
     assert rec.lost_samples == 4 and rec.seq[-1] == 99
@@ -72,13 +72,13 @@ def test_gaps_become_events_and_sequence_jumps_never_samples(tmp_path):
 def test_temperature_column_and_comment_lines(tmp_path):
     rows = [r + f",{20 + 0.5 * i}" for i, r in enumerate(level_rows(n=5))]
     text = "# logger v2\n# units: s, m/s^2, degC\n" + HEADER + ",temperature_c\n" + "\n".join(rows)
-    rec = read_csv(write(tmp_path, text), None)
+    rec = read_csv(write(tmp_path, text), None, relative_time=True)
     assert_array_equal(rec.temperature_c, [20, 20.5, 21, 21.5, 22])
 
 
 @pytest.mark.skipif(not KLIPPER.exists(), reason="real Klipper fixture not available")
 def test_real_klipper_capture():
-    rec = read_csv(KLIPPER, None, fmt="klipper")
+    rec = read_csv(KLIPPER, None, relative_time=True, fmt="klipper")
     assert rec.n_samples == 50
     # First row: 76.666231,267.996131,210.568389,9762.716208 (mm/s^2).
     assert rec.time_ns[0] == 76_666_231_000
@@ -91,7 +91,7 @@ def test_real_klipper_capture():
 @pytest.mark.skipif(not KLIPPER.exists(), reason="real Klipper fixture not available")
 def test_klipper_file_under_the_default_format_points_to_klipper():
     with pytest.raises(RecordingError, match=r"Klipper header .* use --format klipper"):
-        read_csv(KLIPPER, None)
+        read_csv(KLIPPER, None, relative_time=True)
 
 
 @pytest.mark.skipif(not PHONE.exists(), reason="real phone recording not available")
@@ -101,8 +101,10 @@ def test_real_phone_recording_needs_its_columns_named():
         match=r"line 4: header must be 'time_s,accel_x,accel_y,accel_z'.*got "
         r"'t_s,ax_mps2,ay_mps2,az_mps2'; name the columns to use with --columns",
     ):
-        read_csv(PHONE, None)
-    rec = read_csv(PHONE, None, columns=["t_s", "ax_mps2", "ay_mps2", "az_mps2"])
+        read_csv(PHONE, None, relative_time=True)
+    rec = read_csv(
+        PHONE, None, relative_time=True, columns=["t_s", "ax_mps2", "ay_mps2", "az_mps2"]
+    )
     assert rec.n_samples == 3145 and rec.dt_ns == 10_000_000
     assert_allclose(rec.accel[0], [0.299228, 0.082329, 9.695189], rtol=1e-7)
     assert_allclose(np.linalg.norm(rec.accel.mean(axis=0)), G, rtol=0.01)
@@ -141,18 +143,18 @@ def test_units_are_checked_against_gravity(tmp_path, fmt, scale, message):
     header = "#time,accel_x,accel_y,accel_z" if fmt == "klipper" else HEADER
     path = write(tmp_path, "\n".join([header, *level_rows(scale=scale)]))
     with pytest.raises(RecordingError, match=message):
-        read_csv(path, None, fmt=fmt)
+        read_csv(path, None, relative_time=True, fmt=fmt)
 
 
 def test_gravity_axis_must_match_the_data(tmp_path):
     path = write(tmp_path, "\n".join([HEADER, *level_rows()]))
-    assert read_csv(path, None, gravity_axis="z").n_samples == 50
+    assert read_csv(path, None, relative_time=True, gravity_axis="z").n_samples == 50
     with pytest.raises(RecordingError, match=r"gravity axis -z was given.*largest on z"):
-        read_csv(path, None, gravity_axis="-z")
+        read_csv(path, None, relative_time=True, gravity_axis="-z")
     with pytest.raises(RecordingError, match=r"gravity axis x was given.*largest on z"):
-        read_csv(path, None, gravity_axis="x")
+        read_csv(path, None, relative_time=True, gravity_axis="x")
     with pytest.raises(ImuSquareError, match=r"gravity_axis must be one of .* got 'up'"):
-        read_csv(path, None, gravity_axis="up")
+        read_csv(path, None, relative_time=True, gravity_axis="up")
 
 
 @pytest.mark.parametrize(
@@ -190,20 +192,20 @@ def test_gravity_axis_must_match_the_data(tmp_path):
 def test_errors_name_file_and_line(tmp_path, text, message):
     path = write(tmp_path, text)
     with pytest.raises(RecordingError, match=message) as exc:
-        read_csv(path, None)
+        read_csv(path, None, relative_time=True)
     assert "\n" not in str(exc.value)
 
 
 def test_missing_file(tmp_path):
     with pytest.raises(RecordingError, match=r"nope.csv: CSV file not found"):
-        read_csv(tmp_path / "nope.csv", None)
+        read_csv(tmp_path / "nope.csv", None, relative_time=True)
 
 
 def test_columns_mapping_errors(tmp_path):
     path = write(tmp_path, "t,a,b,c\n0,0,0,9.8\n0.001,0,0,9.8\n")
-    rec = read_csv(path, None, columns=["t", "a", "b", "c"])
+    rec = read_csv(path, None, relative_time=True, columns=["t", "a", "b", "c"])
     assert rec.n_samples == 2
     with pytest.raises(RecordingError, match=r"header 't,a,b,c' has no column 'd'"):
-        read_csv(path, None, columns=["t", "a", "b", "d"])
+        read_csv(path, None, relative_time=True, columns=["t", "a", "b", "d"])
     with pytest.raises(RecordingError, match=r"columns must name time, x, y, z"):
-        read_csv(path, None, columns=["t", "a"])
+        read_csv(path, None, relative_time=True, columns=["t", "a"])

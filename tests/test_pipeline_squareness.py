@@ -188,7 +188,9 @@ def test_real_rectangle_is_refused_in_one_line(tmp_path):
     from imu_square.io.csv import read_csv
 
     program = TestProgram(cycles_per_direction=2, overshoot_rad=0.0, dwell_s=2.0)
-    rec = read_csv(REALDATA, program, columns=["t_s", "ax_mps2", "ay_mps2", "az_mps2"])
+    rec = read_csv(
+        REALDATA, program, columns=["t_s", "ax_mps2", "ay_mps2", "az_mps2"], relative_time=True
+    )
     with pytest.raises(AnalysisError, match=r"no circular motion matching the program") as exc:
         analyze(rec)
     assert "\n" not in str(exc.value)

@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+import time
 
 import numpy as np
 from numpy.testing import assert_allclose
@@ -38,6 +39,8 @@ def test_simulate_writes_recording_and_truth(tmp_path, capsys):
     out = tmp_path / "out" / "run.mcap"
     argv = [
         "simulate",
+        "--start-time",
+        "2023-11-14T22:13:20Z",  # the library's default: the same run bit for bit
         "--program",
         str(program),
         "--machine",
@@ -112,3 +115,13 @@ def test_simulate_user_errors_are_one_line(tmp_path):
         assert proc.returncode == 2
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and needle in lines[0], proc.stderr
+
+
+def test_simulate_stamps_the_time_it_ran_or_the_time_asked(tmp_path):
+    before = time.time_ns()
+    assert main(["simulate", "-o", str(tmp_path / "now.mcap"), "--seed", "1"]) == 0
+    t0 = read_mcap(tmp_path / "now.mcap").time_ns[0]
+    assert before - 1_000_000_000 <= t0 <= time.time_ns()
+    argv = ["simulate", "-o", str(tmp_path / "then.mcap"), "--seed", "1"]
+    assert main([*argv, "--start-time", "2026-09-01T02:30:00Z"]) == 0
+    assert read_mcap(tmp_path / "then.mcap").time_ns[0] == 1_788_229_800_000_000_000

@@ -9,7 +9,8 @@ from imu_square.errors import ImuSquareError, ImuSquareWarning
 from imu_square.io.csv import FORMATS, GRAVITY_AXES, read_csv
 from imu_square.io.mcap import write_mcap
 from imu_square.io.recording import SensorInfo
-from imu_square.program import read_program
+from imu_square.io.times import parse_start_time
+from imu_square.program import TestProgram, read_program
 from imu_square.units import UG, G
 
 HELP = "convert a CSV recording to MCAP"
@@ -24,7 +25,10 @@ def register(sub):
         "and write them with the test program to an MCAP recording.",
     )
     p.add_argument("csv", help="CSV file")
-    p.add_argument("--program", required=True, help="test program TOML the machine ran")
+    p.add_argument(
+        "--program",
+        help="test program TOML the machine ran (default with --config: the monitor file's)",
+    )
     p.add_argument("-o", "--output", required=True, help="MCAP file to write")
     p.add_argument(
         "--format",
@@ -60,12 +64,48 @@ def register(sub):
     noise.add_argument("--noise-ug", type=float, help=argparse.SUPPRESS)
     p.add_argument("--sensor-model", default="unknown", help="sensor model, e.g. ADXL355")
     p.add_argument("--machine-id", default="", help="machine the test ran on")
+    p.add_argument(
+        "--config",
+        metavar="MONITOR.toml",
+        help="the monitor file of the machine the test ran on: its machine id (which "
+        "--machine-id must match) and, without --program, its program",
+    )
+    when = p.add_mutually_exclusive_group()
+    when.add_argument(
+        "--start-time",
+        metavar="ISO8601",
+        help="when the recording started, with its time zone (2026-09-01T02:30:00Z); needed "
+        "when the file's times are seconds from the logger's power-on, not dates",
+    )
+    when.add_argument(
+        "--relative-time",
+        action="store_true",
+        help="keep times that are not dates (before 2000) as they are; the monitor does "
+        "not judge such a recording",
+    )
     p.set_defaults(func=run)
 
 
 def run(args):
     """Import the CSV and write the MCAP file."""
-    program = read_program(args.program)
+    machine_id, program_path = args.machine_id, args.program
+    if args.config is not None:
+        from imu_square.monitor.config import read_monitor
+
+        config = read_monitor(args.config)
+        if machine_id and machine_id != config.machine_id:
+            raise ImuSquareError(
+                f"--machine-id {machine_id!r} is not the machine of {args.config} "
+                f"({config.machine_id!r})"
+            )
+        machine_id = config.machine_id
+        if program_path is None:
+            program = config.test_program() or TestProgram()
+    if program_path is not None:
+        program = read_program(program_path)
+    elif args.config is None:
+        raise ImuSquareError("give the test program: --program PROGRAM.toml, or --config")
+    start_ns = None if args.start_time is None else parse_start_time(args.start_time)
     columns = None if args.columns is None else [c.strip() for c in args.columns.split(",")]
     if args.noise_ug is not None:
         warnings.warn(
@@ -91,9 +131,11 @@ def run(args):
         program,
         fmt=args.format,
         gravity_axis=args.gravity_axis,
-        machine_id=args.machine_id,
+        machine_id=machine_id,
         columns=columns,
         sensor=sensor,
+        start_time_ns=start_ns,
+        relative_time=args.relative_time,
     )
     write_mcap(recording, args.output)
     gaps = recording.gaps()

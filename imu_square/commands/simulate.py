@@ -2,8 +2,10 @@
 
 import json
 import sys
+import time
 from pathlib import Path
 
+from imu_square.io.times import parse_start_time
 from imu_square.program import read_program
 from imu_square.simulate import (
     EFFECTS,
@@ -41,6 +43,11 @@ def register(sub):
     )
     p.add_argument("--no-events", action="store_true", help="write no block start/end events")
     p.add_argument("--truth", help="truth JSON path (default: OUTPUT with .truth.json)")
+    p.add_argument(
+        "--start-time",
+        metavar="ISO8601",
+        help="when the recording starts, with its time zone (default: now, to the second)",
+    )
     p.set_defaults(func=run)
 
 
@@ -52,8 +59,12 @@ def run(args):
     machine = read_machine(args.machine or data_path("machine_ideal.toml"))
     sensor = read_sensor(args.sensor or data_path("sensor_ideal.toml"))
     machine, sensor = with_effects(args.effects, machine, sensor)
+    if args.start_time is None:
+        t0_ns = time.time_ns() // 1_000_000_000 * 1_000_000_000
+    else:
+        t0_ns = parse_start_time(args.start_time)
     recording, truth = simulate_run(
-        program, machine, sensor, seed=args.seed, events=not args.no_events
+        program, machine, sensor, seed=args.seed, events=not args.no_events, t0_ns=t0_ns
     )
     out = Path(args.output)
     truth_path = Path(args.truth) if args.truth else out.with_name(out.stem + ".truth.json")

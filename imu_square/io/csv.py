@@ -30,6 +30,7 @@ import numpy as np
 
 from imu_square.errors import RecordingError
 from imu_square.io.recording import AXES, Event, Recording, SensorInfo
+from imu_square.io.times import is_date
 from imu_square.units import G
 from imu_square.validation import check_option
 
@@ -181,7 +182,16 @@ def _gravity(path, accel, fmt, gravity_axis):
 
 
 def read_csv(
-    path, program, *, fmt="imu-square", gravity_axis=None, sensor=None, machine_id="", columns=None
+    path,
+    program,
+    *,
+    fmt="imu-square",
+    gravity_axis=None,
+    sensor=None,
+    machine_id="",
+    columns=None,
+    start_time_ns=None,
+    relative_time=False,
 ):
     """Read accelerometer samples from a CSV file.
 
@@ -205,6 +215,13 @@ def read_csv(
         Header names of the time, x, y, z (and optionally temperature)
         columns, for files whose header differs from the format's; the units
         are still the format's.
+    start_time_ns : int, optional
+        When the recording started: its times are moved to begin then. Needed
+        when the file's times are not dates (before 2000: a logger's clock
+        since its power-on), unless ``relative_time``. [ns]
+    relative_time : bool
+        Keep times that are not dates as they are (the monitor does not judge
+        such a recording).
 
     Returns
     -------
@@ -216,7 +233,8 @@ def read_csv(
     RecordingError
         Naming the file, the line and the column, for an empty file, a wrong
         header, a non-numeric or non-finite cell, times that do not increase,
-        fewer than 2 samples, or units that do not match the format.
+        fewer than 2 samples, units that do not match the format, or times
+        that are no date without a start time.
     """
     check_option("fmt", fmt, FORMATS)
     if gravity_axis is not None:
@@ -260,6 +278,16 @@ def read_csv(
             f"{path}: line {rows[i][0]}: time {cells[i][it]} s does not increase "
             f"(previous line has {cells[i - 1][it]} s)"
         )
+    shifted = ""
+    if start_time_ns is not None:
+        shifted = f", times moved to start at {start_time_ns} ns"
+        time_ns += int(start_time_ns) - int(time_ns[0])
+    elif not is_date(time_ns[0]) and not relative_time:
+        raise RecordingError(
+            f"{path}: its times start at {cells[0][it]} s, which is no date (before 2000: a "
+            f"logger's clock since power-on): give the recording's start with --start-time, "
+            f"e.g. 2026-09-01T02:30:00Z"
+        )
     axis = _gravity(path, raw, fmt, gravity_axis)
     _, unit, factor, _ = FORMATS[fmt]
     accel = (raw * factor).astype(np.float32)
@@ -286,6 +314,6 @@ def read_csv(
         metadata={"producer": "imu-square import", "source_file": name, "source_format": fmt},
         processing=[
             f"read_csv: {name}, format {fmt!r}, {unit} -> m/s^2, gravity on {axis}, "
-            f"dt_ns={dt_ns} from the median step, {len(events)} gaps"
+            f"dt_ns={dt_ns} from the median step, {len(events)} gaps{shifted}"
         ],
     )
