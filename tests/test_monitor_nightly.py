@@ -335,3 +335,49 @@ def test_a_two_feed_recording_is_an_invalid_night_named_as_such(rig, capsys):
     code, record = judge(rig / "paper.toml", path, capsys)
     assert code == EXIT_CODES["invalid"] and record["state"] == "invalid"
     assert record["invalid_reason"].startswith("the recording runs 2 feeds (9000, 4500 mm/min)")
+
+
+@pytest.mark.slow
+def test_the_trend_chart_keeps_an_earlier_baselines_alarm_and_its_climb(rig, capsys):
+    # A +12 µm/m step fires the alarm; after the repair a new baseline is set. The
+    # chart still draws the first period against its own baseline: its charts' climb
+    # to the alarm, its limits, and where each baseline's runs began.
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.night import judge_history
+    from imu_square.monitor.report.figures import plot_trend
+
+    config = rig / "monitor.toml"
+    states = [
+        judge(config, night(rig, d, alpha=ALPHA + 12e-6), capsys)[1]["state"] for d in range(5, 12)
+    ]
+    assert "alarm" in states
+    runs = [str(night(rig, d)) for d in (12, 13, 14)]
+    assert main(["baseline", "set", "--config", str(config), *runs]) == 0
+    judge(config, night(rig, 15), capsys)
+    with open_history(rig / "history.db") as history:
+        assessment = judge_history(read_monitor(config), history)
+    (first,) = assessment.earlier
+    charted = [n for n in first.nights if n.chart is not None]
+    assert [n.state for n in charted][-1] == "alarm" and len(charted) == 7
+    climb = [n.chart.cusum_pos for n in charted]
+    assert (
+        climb[-1] > first.design.cusum.limit
+        or max(n.chart.z for n in charted) > first.design.shewhart.limit
+    )
+    drawn = {}
+
+    def savefig(fig, *args, **kwargs):
+        bottom = fig.axes[1]
+        drawn["ewma"] = [line for line in bottom.lines if line.get_color() == "tab:cyan"]
+        drawn["starts"] = [line for line in fig.axes[0].lines if line.get_linestyle() == ":"]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plt.Figure, "savefig", savefig)
+        plot_trend(assessment, rig / "trend.png")
+    assert len(drawn["ewma"]) == 2  # one EWMA line for each baseline's period
+    assert len(drawn["starts"]) == 2  # a start mark for each baseline

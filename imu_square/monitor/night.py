@@ -252,7 +252,26 @@ def judge_history(config, history):
     current = None if baseline_row is None else baseline_row.id
     earlier = {e.run_id: e for e in history.evaluations(machine) if e.baseline_id != current}
     runs = history.runs(machine, settings_hash=settings)
-    return judge_runs(runs, baseline_row, design, anchors, earlier)
+    assessment = judge_runs(runs, baseline_row, design, anchors, earlier)
+    return replace(assessment, earlier=_earlier_periods(config, history, baseline_row))
+
+
+def _earlier_periods(config, history, current):
+    """Each earlier baseline's period judged against it, as it was then (oldest first)."""
+    rows = [b for b in history.baselines(config.machine_id) if current and b.id < current.id]
+    if not rows:
+        return ()
+    periods = []
+    for row, following in zip(rows, [*rows[1:], current], strict=True):
+        runs = history.runs(
+            config.machine_id,
+            since=row.first_run_at_ns,
+            until=following.first_run_at_ns,
+            settings_hash=row.settings_hash,
+        )
+        design = stored_design(history, row, config.alarms)
+        periods.append(judge_runs(runs, row, design, tuple(history.anchors(row.id))))
+    return tuple(periods)
 
 
 def judge_recording(config, history, path, program=None, complete=True, alert=False):

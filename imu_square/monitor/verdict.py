@@ -153,6 +153,9 @@ class Assessment:
         Every run of the machine, in recording-time order.
     anchors : tuple of AnchorRow
         The baseline's anchors by reference methods.
+    earlier : tuple of Assessment
+        Each earlier baseline's own period judged against it, oldest first:
+        its runs from its first run until the next baseline's.
     """
 
     machine_id: str
@@ -160,6 +163,7 @@ class Assessment:
     design: object
     nights: tuple
     anchors: tuple = field(default=())
+    earlier: tuple = field(default=())
 
     @property
     def latest(self):

@@ -1,10 +1,11 @@
 """The monitor's figures: the trend chart and the sensor's state over time.
 
-The trend chart shows every night's change since the baseline with its
-standard uncertainty, the alarm design's Shewhart limits (``+-L u`` of each
-night), the baseline's own band, the baseline's runs, anchors, remounts and
-invalid runs, and below it the EWMA and CUSUM statistics with their limits,
-so a reader can see why a night was judged as it was.
+The trend chart shows every night's change since the baseline of its time
+with its standard uncertainty, the alarm design's Shewhart limits (``+-L u``
+of each night), each baseline's own band, runs and start, anchors, remounts
+and invalid runs, and below it the EWMA and CUSUM statistics with their
+limits, every baseline's period with its own, so a reader can see why a night
+was judged as it was, before a repair as after it.
 """
 
 import math
@@ -35,10 +36,15 @@ def _dates(nights):
 def plot_trend(assessment, path, title=""):
     """Write the trend chart of a machine's assessment as a PNG.
 
+    Every baseline's period is drawn against that baseline, with its own
+    limits and chart statistics, so an earlier alarm's climb stays in view; a
+    dotted line marks where each baseline's runs begin.
+
     Parameters
     ----------
     assessment : Assessment
-        The machine's history judged against its current baseline.
+        The machine's history judged against its current baseline (and its
+        earlier baselines' periods, :attr:`Assessment.earlier`).
     path : str or Path
         PNG file to write.
     title : str
@@ -50,24 +56,65 @@ def plot_trend(assessment, path, title=""):
     import matplotlib.dates as mdates
     import matplotlib.pyplot as plt
 
-    nights = [n for n in assessment.nights if n.run.recorded_at_ns is not None]
-    design = assessment.design
     fig, (top, bottom) = plt.subplots(
         2, 1, figsize=(11, 7.5), sharex=True, height_ratios=(3, 2), constrained_layout=True
     )
-    base = assessment.baseline_row
-    if base is not None and base.first_run_at_ns and base.last_run_at_ns:
-        for ax in (top, bottom):
-            ax.axvspan(
-                datetime_from_ns(base.first_run_at_ns),
-                datetime_from_ns(base.last_run_at_ns),
-                color="tab:green",
-                alpha=0.12,
-                label="baseline runs" if ax is top else None,
-            )
-        band = base.u_squareness_mean_rad / abs(math.cos(2 * base.eps_c_rad)) / URAD
-        top.axhspan(-band, band, color="tab:green", alpha=0.2, label=f"baseline ±u ({band:.1f})")
     top.axhline(0.0, color="black", lw=0.8)
+    labelled = set()
+    for period in (*assessment.earlier, assessment):
+        _draw_period(top, bottom, period, labelled)
+    nights = [n for n in assessment.nights if n.run.recorded_at_ns is not None]
+    invalid = [n for n in nights if n.state == "invalid"]
+    if invalid:
+        y0 = top.get_ylim()[0]
+        top.plot(_dates(invalid), [y0] * len(invalid), "x", color="grey", label="invalid run")
+    stale = [n for n in nights if n.state == "stale_baseline"]
+    if stale:
+        top.axvline(_dates(stale[:1])[0], color="tab:purple", ls=":", label="sensor remounted")
+    if math.isfinite(assessment.anchor_rad):
+        offset = assessment.anchor_rad / URAD
+        right = top.secondary_yaxis("right", functions=(lambda y: y + offset, lambda y: y - offset))
+        right.set_ylabel("machine squareness (anchored) [µm/m]")
+    top.set_ylabel("change since the baseline of its time [µm/m]")
+    top.set_title(title or f"machine {assessment.machine_id}: squareness change")
+    _legend(top, ncol=3)
+    top.grid(alpha=0.3)
+    bottom.set_ylabel("chart statistic [z units]")
+    bottom.set_title("EWMA and CUSUM on z = change / its uncertainty")
+    _legend(bottom, ncol=4)
+    bottom.grid(alpha=0.3)
+    bottom.xaxis.set_major_formatter(mdates.ConciseDateFormatter(mdates.AutoDateLocator()))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def _draw_period(top, bottom, assessment, labelled):
+    """One baseline's period: its band, its nights, its limits and its chart statistics."""
+
+    def label(name):
+        # Each legend entry once, however many periods draw it.
+        if name in labelled:
+            return None
+        labelled.add(name)
+        return name
+
+    base, design = assessment.baseline_row, assessment.design
+    start = base.first_run_at_ns if base is not None else None
+    nights = [
+        n
+        for n in assessment.nights
+        if n.run.recorded_at_ns is not None and (start is None or n.run.recorded_at_ns >= start)
+    ]
+    if base is not None and base.first_run_at_ns and base.last_run_at_ns:
+        first, last = datetime_from_ns(base.first_run_at_ns), datetime_from_ns(base.last_run_at_ns)
+        for ax in (top, bottom):
+            ax.axvspan(first, last, color="tab:green", alpha=0.12, label=label("baseline runs"))
+            ax.axvline(first, color="tab:green", ls=":", lw=1.0, label=label("baseline set"))
+        band = base.u_squareness_mean_rad / abs(math.cos(2 * base.eps_c_rad)) / URAD
+        span = [first, max([last, *_dates(nights)])]
+        top.fill_between(
+            span, -band, band, color="tab:green", alpha=0.2, label=label("baseline ±u")
+        )
     judged = [n for n in nights if math.isfinite(n.change_rad)]
     for state, (colour, marker) in _STATE_STYLE.items():
         sel = [n for n in judged if n.state == state]
@@ -81,7 +128,7 @@ def plot_trend(assessment, path, title=""):
                 ms=4,
                 capsize=2,
                 lw=0.8,
-                label=state,
+                label=label(state),
             )
     latched = [n for n in judged if n.state == "alarm" and n.chart and n.chart.state != "alarm"]
     if latched:
@@ -92,49 +139,31 @@ def plot_trend(assessment, path, title=""):
             mfc="none",
             mec="tab:red",
             ms=9,
-            label="alarm standing",
+            label=label("alarm standing"),
         )
     charted = [n for n in judged if n.chart is not None]
-    if design is not None and charted:
-        dates = _dates(charted)
-        lim = np.array([design.shewhart.limit * n.chart.u_change_rad / URAD for n in charted])
-        top.step(dates, lim, where="mid", color="tab:red", lw=0.8, ls="--", label="Shewhart limit")
-        top.step(dates, -lim, where="mid", color="tab:red", lw=0.8, ls="--")
-        bottom.plot(dates, [n.chart.ewma for n in charted], "-", color="tab:cyan", label="EWMA")
-        bottom.plot(
-            dates, [n.chart.cusum_pos for n in charted], "-", color="tab:brown", label="CUSUM +"
+    if design is None or not charted:
+        return
+    dates = _dates(charted)
+    lim = np.array([design.shewhart.limit * n.chart.u_change_rad / URAD for n in charted])
+    top.step(
+        dates, lim, where="mid", color="tab:red", lw=0.8, ls="--", label=label("Shewhart limit")
+    )
+    top.step(dates, -lim, where="mid", color="tab:red", lw=0.8, ls="--")
+    bottom.plot(dates, [n.chart.ewma for n in charted], "-", color="tab:cyan", label=label("EWMA"))
+    bottom.plot(
+        dates, [n.chart.cusum_pos for n in charted], "-", color="tab:brown", label=label("CUSUM +")
+    )
+    bottom.plot(
+        dates, [-n.chart.cusum_neg for n in charted], "-", color="tab:olive", label=label("CUSUM −")
+    )
+    for value, colour, name in (
+        (design.ewma.limit, "tab:cyan", "EWMA limit"),
+        (design.cusum.limit, "tab:brown", "CUSUM limit"),
+    ):
+        bottom.hlines(
+            [value, -value], dates[0], dates[-1], colors=colour, ls="--", lw=0.8, label=label(name)
         )
-        bottom.plot(
-            dates, [-n.chart.cusum_neg for n in charted], "-", color="tab:olive", label="CUSUM −"
-        )
-        for value, colour, name in (
-            (design.ewma.limit, "tab:cyan", "EWMA limit"),
-            (design.cusum.limit, "tab:brown", "CUSUM limit"),
-        ):
-            bottom.axhline(value, color=colour, ls="--", lw=0.8, label=name)
-            bottom.axhline(-value, color=colour, ls="--", lw=0.8)
-    invalid = [n for n in nights if n.state == "invalid"]
-    if invalid:
-        y0 = top.get_ylim()[0]
-        top.plot(_dates(invalid), [y0] * len(invalid), "x", color="grey", label="invalid run")
-    stale = [n for n in nights if n.state == "stale_baseline"]
-    if stale:
-        top.axvline(_dates(stale[:1])[0], color="tab:purple", ls=":", label="sensor remounted")
-    if math.isfinite(assessment.anchor_rad):
-        offset = assessment.anchor_rad / URAD
-        right = top.secondary_yaxis("right", functions=(lambda y: y + offset, lambda y: y - offset))
-        right.set_ylabel("machine squareness (anchored) [µm/m]")
-    top.set_ylabel("change since the baseline [µm/m]")
-    top.set_title(title or f"machine {assessment.machine_id}: squareness change")
-    _legend(top, ncol=3)
-    top.grid(alpha=0.3)
-    bottom.set_ylabel("chart statistic [z units]")
-    bottom.set_title("EWMA and CUSUM on z = change / its uncertainty")
-    _legend(bottom, ncol=4)
-    bottom.grid(alpha=0.3)
-    bottom.xaxis.set_major_formatter(mdates.ConciseDateFormatter(mdates.AutoDateLocator()))
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def plot_sensor(assessment, path):
