@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -330,3 +331,42 @@ def test_a_numpy_integer_is_a_whole_number_to_the_planner():
     # a numpy integer was refused as "baseline runs must be a whole number"
     goal = Goal(baseline_runs=np.int64(5))
     assert plan_test(SENSOR25, LIMITS, goal) == plan_test(SENSOR25, LIMITS, Goal(baseline_runs=5))
+
+
+@pytest.mark.slow
+def test_plan_says_how_many_nights_the_monitors_charts_take(tmp_path, capsys):
+    # One night's 95 % test "detects" 5 µm/m here (z sigma_change = 4.3), yet the
+    # monitor, designed for one false alarm in 730 nights, needs more than a night.
+    argv = ["plan", "--noise-density-ug", "25", "--max-feed-mm-min", "30000"]
+    argv += ["--max-accel-m-s2", "10", "--travel-mm", "500", "--time-s", "300"]
+    argv += ["--stable-servo", "--baseline-runs", "10", "--detect-um-m", "5", "--json"]
+    assert main(argv) == 0
+    out = capsys.readouterr()
+    plan = json.loads(out.out)
+    assert plan["detects_target"] is True and plan["detectable_change_urad"] < 5
+    assert plan["monitor_false_alarm_nights"] == 730 and plan["monitor_step_urad"] == 5
+    assert plan["monitor_nights_to_detect_median"] > 1
+    assert plan["monitor_nights_to_detect_p90"] >= plan["monitor_nights_to_detect_median"]
+    assert "one night alone, a two-sided test at 95%" in out.err
+    assert re.search(r"the monitor \(.*730 nights\): a step of 5 µm/m alarms after", out.err)
+    # The monitor's own design code gives the same nights for the same night law.
+    from imu_square.monitor.stats.alarms import design_alarms
+
+    design = design_alarms(
+        730,
+        plan["sigma_run_urad"] * URAD,
+        step_rad=5 * URAD,
+        nu=plan["cycles_per_direction"][0] - 1,
+        baseline_sd_ratio=10**-0.5,
+        mc_nights=400_000,
+    )
+    assert plan["monitor_nights_to_detect_median"] == design.check.step_median
+    # A monitor file asking for more false alarms finds the step sooner.
+    monitor = tmp_path / "monitor.toml"
+    monitor.write_text(
+        '[monitor]\nmachine_id = "m"\nhistory = "h.db"\n\n[alarms]\nfalse_alarm_nights = 50\n'
+    )
+    assert main([*argv, "--config", str(monitor)]) == 0
+    eager = json.loads(capsys.readouterr().out)
+    assert eager["monitor_false_alarm_nights"] == 50
+    assert eager["monitor_nights_to_detect_p90"] < plan["monitor_nights_to_detect_p90"]

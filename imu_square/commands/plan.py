@@ -3,9 +3,13 @@
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 HELP = "plan a circle test: radius, feed(s), cycles and dwell for a sensor and a machine"
+# Nights simulated to check the monitor's design for a plan: the step's run lengths
+# (2000 machines) do not depend on it, the false-alarm check's precision does (5 %).
+_DESIGN_NIGHTS = 400_000
 
 
 def register(sub):
@@ -89,6 +93,19 @@ def register(sub):
         action="store_true",
         help="plan two feeds of one circle, for analyze --separate-gravity",
     )
+    g.add_argument(
+        "--config",
+        metavar="MONITOR.toml",
+        help="the machine's monitor file: its alarm design (false alarms, step) says how many "
+        "nights the monitor takes to find the step",
+    )
+    g.add_argument(
+        "--false-alarm-nights",
+        type=float,
+        metavar="N",
+        help="the monitor's design: one false alarm in N valid nights (default: the monitor "
+        "file's, else 730)",
+    )
     p.add_argument("-o", "--output", metavar="PLAN.toml", help="write the program file")
     p.add_argument("--json", action="store_true", help="the plan as one JSON object on stdout")
     p.set_defaults(func=run)
@@ -157,10 +174,13 @@ def run(args):
         separate_gravity=args.separate_gravity,
         stable_servo=args.stable_servo,
     )
+    alarms = _alarm_settings(args)
     try:
         plan = plan_test(sensor, limits, goal)
     except PlanInputError as exc:
         raise _in_flag_units(exc, args) from None
+    if plan.program.n_feeds == 1:
+        plan = replace(plan, monitor=_monitor_detection(plan, alarms))
     print(plan.summary(), file=sys.stderr)
     if args.output:
         out = Path(args.output)
@@ -172,6 +192,38 @@ def run(args):
     if args.json:
         print(json.dumps(plan.to_json_dict()), file=sys.stdout, flush=True)
     return 0 if plan.detects is not False else 1
+
+
+def _alarm_settings(args):
+    """The monitor's alarm settings: the monitor file's, a flag overriding its false alarms."""
+    from imu_square.errors import ImuSquareError
+    from imu_square.monitor.config import AlarmSettings, read_monitor
+
+    settings = AlarmSettings() if args.config is None else read_monitor(args.config).alarms
+    nights = args.false_alarm_nights
+    if nights is not None:
+        if not (math.isfinite(nights) and nights >= 10):
+            raise ImuSquareError(f"--false-alarm-nights must be a number >= 10, got {nights!r}")
+        settings = replace(settings, false_alarm_nights=nights)
+    return settings
+
+
+def _monitor_detection(plan, alarms):
+    """Nights the monitor's charts, designed for this test, take to find the step."""
+    from imu_square.monitor.stats.alarms import design_alarms
+    from imu_square.program.planner import MonitorDetection
+
+    step = plan.goal.change_rad or alarms.step_rad
+    design = design_alarms(
+        alarms.false_alarm_nights,
+        plan.sigma_run_rad,
+        step_rad=step,
+        nu=plan.cycle_pairs - 1,
+        baseline_sd_ratio=min(plan.goal.baseline_runs**-0.5, 2.0),
+        mc_nights=_DESIGN_NIGHTS,
+    )
+    check = design.check
+    return MonitorDetection(alarms.false_alarm_nights, step, check.step_median, check.step_p90)
 
 
 def _in_flag_units(exc, args):

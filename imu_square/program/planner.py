@@ -23,12 +23,15 @@ A program at several feeds of one circle separates gravity coupling
 sigma_i^2)``.
 
 The change of the squareness against a baseline that is the mean of ``N``
-runs has ``sigma_change = sigma_run sqrt(1 + 1/N)``. A change is flagged when
-it exceeds ``z sigma_change``, ``z`` the two-sided normal quantile of the
-confidence (a false alarm rate of ``1 - confidence`` on an unchanged
-machine): the smallest change detected at that confidence (the "minimal
-detectable change") is ``z sigma_change`` plus a bound of the biases that may
-differ between the baseline and the run.
+runs has ``sigma_change = sigma_run sqrt(1 + 1/N)``. One night alone flags a
+change when it exceeds ``z sigma_change``, ``z`` the two-sided normal quantile
+of the confidence (a false alarm rate of ``1 - confidence`` on an unchanged
+machine, 18 a year at 95 %): the smallest change that one-night test detects
+(the "minimal detectable change") is ``z sigma_change`` plus a bound of the
+biases that may differ between the baseline and the run; the plans are ranked
+by it. The monitor itself runs designed charts at a far lower false-alarm
+rate (:mod:`imu_square.monitor.stats.alarms`): ``imu-square plan`` reports, in
+:class:`MonitorDetection`, how many nights those charts take to find the step.
 
 The bias counted is the servo's amplitude leak (issue 9): first-order axis
 lags ``tau`` shrink each axis's amplitude by ``1/sqrt(1 + (omega tau)^2)``,
@@ -229,6 +232,28 @@ class Goal:
 
 
 @dataclass(frozen=True)
+class MonitorDetection:
+    """How soon the monitor's designed charts find a step, for a planned test.
+
+    Attributes
+    ----------
+    false_alarm_nights : float
+        The charts' design: one false alarm in this many valid nights. [nights]
+    step_rad : float
+        The step of squareness found. [rad]
+    median_nights, p90_nights : float
+        Nights from the step to the alarm: the median, and the count within
+        which 90 % of machines alarm (Monte Carlo of the designed scheme,
+        from a fresh start, averaged over the baseline's error). [nights]
+    """
+
+    false_alarm_nights: float
+    step_rad: float
+    median_nights: float
+    p90_nights: float
+
+
+@dataclass(frozen=True)
 class Plan:
     """A planned test and what it resolves.
 
@@ -267,6 +292,9 @@ class Plan:
         The estimator's efficiency used.
     separation_cost : float
         With two feeds: sigma over the best one-feed plan's in the same time; else 1.
+    monitor : MonitorDetection or None
+        The nights the monitor's charts take to find the step; None until
+        worked out (``imu-square plan`` does, from the monitor's own design).
     """
 
     program: TestProgram
@@ -284,6 +312,7 @@ class Plan:
     sensor: SensorSpec
     efficiency: float = ESTIMATOR_EFFICIENCY
     separation_cost: float = field(default=1.0)
+    monitor: MonitorDetection | None = None
 
     @property
     def detects(self):
@@ -291,6 +320,11 @@ class Plan:
         if self.goal.change_rad is None:
             return None
         return self.detectable_change_rad <= self.goal.change_rad
+
+    @property
+    def cycle_pairs(self):
+        """CCW and CW cycle pairs of a one-feed plan's night: its ``u`` has one fewer dof."""
+        return self.program.cycles_per_direction * self.program.runs
 
     def feed_programs(self):
         """The one-feed program of each feed."""
@@ -304,7 +338,7 @@ class Plan:
         dict
         """
         feeds = self.feed_programs()
-        goal = self.goal
+        goal, m = self.goal, self.monitor
         return {
             "sigma_run_urad": self.sigma_run_rad / URAD,
             "sigma_change_urad": self.sigma_change_rad / URAD,
@@ -333,6 +367,10 @@ class Plan:
             "analysis_cutoff_hz": self.cutoff_hz,
             "separate_gravity": goal.separate_gravity,
             "separation_cost": self.separation_cost,
+            "monitor_false_alarm_nights": None if m is None else m.false_alarm_nights,
+            "monitor_step_urad": None if m is None else m.step_rad / URAD,
+            "monitor_nights_to_detect_median": None if m is None else m.median_nights,
+            "monitor_nights_to_detect_p90": None if m is None else m.p90_nights,
             "program": self.program.to_mapping(),
         }
 
@@ -362,8 +400,11 @@ class Plan:
             + (f"; two feeds cost x{self.separation_cost:.2f}" if goal.separate_gravity else ""),
             f"  change against a baseline of {goal.baseline_runs} run"
             f"{'s' if goal.baseline_runs > 1 else ''}: σ {self.sigma_change_rad / URAD:.2f} "
-            f"{unit}; detects {self.detectable_change_rad / URAD:.1f} {unit} at "
-            f"{goal.confidence:.0%} confidence (z = {self.z:.2f})",
+            f"{unit}",
+            *self._monitor_lines(),
+            f"  one night alone, a two-sided test at {goal.confidence:.0%} (z = {self.z:.2f}, "
+            f"a false alarm in {1 / (1 - goal.confidence):.0f} nights): detects "
+            f"{self.detectable_change_rad / URAD:.1f} {unit}",
             f"  servo amplitude leak: up to {self.servo_leak_rad / URAD:.2f} {unit} "
             + (
                 "(counted in the detectable change)"
@@ -373,17 +414,31 @@ class Plan:
         ]
         if goal.change_rad is not None:
             target = f"{goal.change_rad / URAD:g} {unit}"
+            test = f"one night's {goal.confidence:.0%} test"
             if self.detects:
-                lines.append(f"  target {target}: detected")
+                lines.append(f"  target {target}: {test} detects it")
             elif self.time_to_detect_s is None:
-                lines.append(f"  target {target}: NOT detected: the servo leak alone is larger")
+                lines.append(
+                    f"  target {target}: NOT detected by {test}: the servo leak alone is larger"
+                )
             else:
                 lines.append(
-                    f"  target {target}: NOT detected; this circle needs "
+                    f"  target {target}: NOT detected by {test}; this circle needs "
                     f"{self.time_to_detect_s:.0f} s"
                 )
         lines.append(f"  analyse with --cutoff-hz {self.cutoff_hz:g}")
         return "\n".join(lines)
+
+    def _monitor_lines(self):
+        m = self.monitor
+        if m is None:
+            return []
+        return [
+            f"  the monitor (Shewhart, EWMA and CUSUM, one false alarm in "
+            f"{m.false_alarm_nights:g} nights): a step of {m.step_rad / URAD:g} "
+            f"{SQUARENESS_UNIT} alarms after {m.median_nights:g} night(s), 90 % within "
+            f"{m.p90_nights:g}"
+        ]
 
     def to_toml(self):
         """The program file, headed by comments that say what the plan predicts.
@@ -397,8 +452,14 @@ class Plan:
             "# Planned by imu-square plan:",
             f"#   sigma of one run {self.sigma_run_rad / URAD:.2f} um/m; of the change against "
             f"{self.goal.baseline_runs} baseline run(s) {self.sigma_change_rad / URAD:.2f} um/m",
-            f"#   detects {self.detectable_change_rad / URAD:.1f} um/m at "
-            f"{self.goal.confidence:.0%} confidence; {self.duration_s:.0f} s on the machine",
+            *(
+                f"#   the monitor: a step of {m.step_rad / URAD:g} um/m alarms after "
+                f"{m.median_nights:g} night(s) (median), 90 % within {m.p90_nights:g}"
+                for m in [self.monitor]
+                if m is not None
+            ),
+            f"#   one night's two-sided {self.goal.confidence:.0%} test detects "
+            f"{self.detectable_change_rad / URAD:.1f} um/m; {self.duration_s:.0f} s on the machine",
             f"#   analyse with --cutoff-hz {self.cutoff_hz:g}",
         ]
         return "\n".join(head) + "\n" + self.program.to_toml()
