@@ -425,6 +425,11 @@ def test_backup_holds_every_committed_run(history, tmp_path):
     history.add_anchor(AnchorRow(baseline_id=base, method="ballbar", value_rad=1e-6))
     history.add_evaluation(EvaluationRow(run_id=ids[5], baseline_id=base, state="ok"))
     dest = tmp_path / "backups" / "history.backup"
+    # A missing folder is never made: it may be a share that is not mounted.
+    with pytest.raises(HistoryError, match=r"backup to .*history\.backup failed"):
+        history.backup(dest)
+    assert not dest.parent.exists()
+    dest.parent.mkdir()
     assert history.backup(dest) == dest
     restored = _restore(history, dest)
     with open_history(restored) as copy:

@@ -193,6 +193,9 @@ def test_history_table_json_plot_since_and_backup(machine, tmp_path, capsys):
     # nights 4 and 5 (09-05, 09-06) and the junk file, timed by its modification
     assert [r["state"] for r in later] == ["ok", "ok", "invalid"]
     assert all(r["recorded_at"] >= "2026-09-05" for r in later)
+    missing = tmp_path / "not-mounted" / "copy.db"
+    assert main(["history", "--config", config, "--backup", str(missing)]) == 2
+    assert "does not exist" in capsys.readouterr().err and not missing.parent.exists()
     assert main(["history", "--config", config, "--backup", str(tmp_path / "copy.db")]) == 0
     capsys.readouterr()
     assert main(["history", "--config", config, "--since", "5 Sept"]) == 2

@@ -62,6 +62,11 @@ def run(args):
         from imu_square.io.output import check_plot_path
 
         check_plot_path(args.plot)
+    if args.backup:
+        from imu_square.io.output import check_output_path
+
+        # Never make a missing folder: an unmounted share would be backed up to local disk.
+        check_output_path(args.backup, overwrite=True)
     with monitor_session(args.config) as (config, history):
         if args.backup:
             path = history.backup(args.backup)

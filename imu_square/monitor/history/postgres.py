@@ -214,7 +214,6 @@ class PostgresBackend:
             f"--dbname={conninfo.make_conninfo('', **params)}",
         ]
         try:
-            dest.parent.mkdir(parents=True, exist_ok=True)
             done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
             if done.returncode != 0:
                 raise HistoryError(

@@ -212,7 +212,6 @@ class SqliteBackend:
             raise HistoryError(f"history backup {dest}: is the history itself")
         tmp = dest.with_name(f".{dest.name}.{os.getpid()}.partial")
         try:
-            dest.parent.mkdir(parents=True, exist_ok=True)
             target = sqlite3.connect(tmp, isolation_level=None)
             try:
                 self.conn.backup(target)
