@@ -172,6 +172,8 @@ def test_a_board_killed_during_the_run_leaves_a_tail_gap_up_to_the_planned_stop(
 
     assert main(["info", str(out)]) == 3
     text = capsys.readouterr().out
+    # One gap count: the tail the board lost is a gap for info as for record.
+    assert f"gaps       1 ({lost} samples lost)" in text
     assert (
         f"run        INCOMPLETE: the last {lost * dt_s:.3f} s ({lost} samples) are missing "
         f"(port lost) (stop: port lost)" in text
@@ -262,8 +264,10 @@ def test_a_board_that_hangs_with_the_port_open_is_given_up_after_the_timeout(tmp
     assert 400 <= int(gap["lost"]) <= 750, gap
     capsys.readouterr()
     assert main(["info", str(tmp_path / "run.mcap"), "--json"]) == 3
-    run = json.loads(capsys.readouterr().out)["run"]
+    summary = json.loads(capsys.readouterr().out)
+    run = summary["run"]
     lost = int(gap["lost"])
+    assert summary["gaps"] == {"count": 1, "lost": lost}
     assert run == {
         "stop": "board silent",
         "complete": False,

@@ -138,11 +138,10 @@ def run(args):
         relative_time=args.relative_time,
     )
     write_mcap(recording, args.output)
-    gaps = recording.gaps()
     print(
         f"imported {recording.n_samples} samples ({recording.duration_s:.3f} s at "
-        f"{recording.sample_rate_hz:.6g} Hz, {len(gaps)} gaps, {recording.lost_samples} lost) "
-        f"from {args.csv} to {args.output}",
+        f"{recording.sample_rate_hz:.6g} Hz, {recording.gap_count} gaps, "
+        f"{recording.lost_samples} lost) from {args.csv} to {args.output}",
         file=sys.stderr,
     )
     return 0

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from imu_square.errors import RecordingError
+from imu_square.io.runlog import parse_detail
 
 AXES = ("x", "y", "z")
 
@@ -184,10 +185,41 @@ class Recording:
         idx = np.flatnonzero(jumps > 1)
         return [(int(i) + 1, int(jumps[i]) - 1) for i in idx]
 
+    def tail_gaps(self):
+        """Samples lost after the last one: a board gone before the recorder stopped.
+
+        The recorder writes such a gap as a ``gap`` event later than the last
+        sample, its ``lost`` count in the detail.
+
+        Returns
+        -------
+        list of int
+            The samples each such gap lost.
+        """
+        if not self.n_samples:
+            return []
+        last = int(self.time_ns[-1])
+        lost = (
+            parse_detail(e.detail).get("lost", "0")
+            for e in self.events
+            if e.kind == "gap" and e.time_ns > last
+        )
+        return [int(n) for n in lost if n.isdigit() and int(n) > 0]
+
+    @property
+    def gap_count(self):
+        """Gaps between samples, and after the last one (:meth:`tail_gaps`). [1]"""
+        return len(self.gaps()) + len(self.tail_gaps())
+
     @property
     def lost_samples(self):
-        """Total samples lost in gaps."""
+        """Samples lost in gaps between the first sample and the last."""
         return int(np.sum(np.diff(self.seq) - 1)) if self.n_samples > 1 else 0
+
+    @property
+    def lost_in_all(self):
+        """Samples lost between samples and after the last one (:meth:`tail_gaps`)."""
+        return self.lost_samples + sum(self.tail_gaps())
 
     def with_processing(self, step, **changes):
         """A copy with ``changes`` applied and ``step`` appended to the processing log."""

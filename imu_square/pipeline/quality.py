@@ -198,7 +198,7 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
     """
     warnings = []
     crb = floor.crb_rad
-    n_gaps = len(recording.gaps())
+    n_gaps = recording.gap_count
     if clipped.size:
         warnings.append(f"{clipped.size} samples at the sensor's full scale (clipping)")
     n_bridged = len(filtered.bridged_spans_s)
@@ -206,7 +206,7 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
         bridged = (
             f" ({n_bridged} short one(s) bridged, their samples left out)" if n_bridged else ""
         )
-        warnings.append(f"{n_gaps} gap(s), {recording.lost_samples} samples lost{bridged}")
+        warnings.append(f"{n_gaps} gap(s), {recording.lost_in_all} samples lost{bridged}")
     for block in seg.blocks:
         if block.lost_end is not None:
             label, (a, b) = block.lost_end
@@ -258,7 +258,7 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
         "clipped_samples": int(clipped.size),
         "gaps": n_gaps,
         "gaps_bridged": n_bridged,
-        "lost_samples": int(recording.lost_samples),
+        "lost_samples": int(recording.lost_in_all),
         "cycles_dropped": [dict(d) for d in cyc.dropped],
         "amplitude_ratio": float(amplitude_ratio),
         "period_disagreement": float(seg.period_disagreement),

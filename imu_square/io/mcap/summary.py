@@ -25,7 +25,6 @@ def summarize(recording):
         run went (:class:`~imu_square.io.runlog.RunOutcome`), None for a
         file without a ``run_end`` event.
     """
-    gaps = recording.gaps()
     program = recording.program
     outcome = run_outcome(recording)
     return {
@@ -34,7 +33,7 @@ def summarize(recording):
         "sample_rate_hz": recording.sample_rate_hz,
         "dt_ns": recording.dt_ns,
         "start_time_ns": int(recording.time_ns[0]) if recording.n_samples else None,
-        "gaps": {"count": len(gaps), "lost": recording.lost_samples},
+        "gaps": {"count": recording.gap_count, "lost": recording.lost_in_all},
         "channels": ["accel_x", "accel_y", "accel_z"]
         + (["temperature_c"] if recording.temperature_c is not None else []),
         "program": None
