@@ -117,19 +117,26 @@ def test_real_phone_recording_needs_its_columns_named():
             "imu-square",
             1e3,
             r"gravity axis z reads 98\d\d on average: this looks like mm/s\^2, "
-            r"but format 'imu-square' expects m/s\^2; use --format klipper or convert",
+            r"but format 'imu-square' expects m/s\^2; use --format klipper$",
         ),
         (
             "klipper",
             1.0,
             r"gravity axis z reads 9.8\d* on average: this looks like m/s\^2, "
-            r"but format 'klipper' expects mm/s\^2; use --format imu-square or convert",
+            r"but format 'klipper' expects mm/s\^2; use --format imu-square$",
         ),
         (
             "imu-square",
             1 / G,
             r"reads 1 on average: this looks like g, but format 'imu-square' "
-            r"expects m/s\^2; use convert to m/s\^2 or convert",
+            r"expects m/s\^2; convert the data to m/s\^2 \(multiply by 9\.80665\)$",
+        ),
+        (
+            # A logger writing mg: 1000 on the gravity axis is 1 g, not "no unit".
+            "imu-square",
+            1e3 / G,
+            r"reads 1000 on average: this looks like mg, but format 'imu-square' "
+            r"expects m/s\^2; convert the data to m/s\^2 \(multiply by 0\.00980665\)$",
         ),
         (
             "imu-square",

@@ -44,8 +44,8 @@ GRAVITY_AXES = ("x", "y", "z", "-x", "-y", "-z")
 
 # The gravity axis must read within this fraction of 1 g (a tilt up to ~40 deg).
 GRAVITY_TOLERANCE = 0.25
-_UNITS = (("m/s^2", G), ("mm/s^2", G * 1e3), ("g", 1.0))
-_SUGGEST = {"m/s^2": "--format imu-square", "mm/s^2": "--format klipper"}
+_UNITS = (("m/s^2", G), ("mm/s^2", G * 1e3), ("g", 1.0), ("mg", 1e3))
+_FORMAT_OF = {"m/s^2": "imu-square", "mm/s^2": "klipper"}
 GAP_FACTOR = 1.5
 
 
@@ -169,14 +169,19 @@ def _gravity(path, accel, fmt, gravity_axis):
     if not looks:
         raise RecordingError(
             f"{path}: gravity axis {name} reads {reading:.4g} on average, which is not 1 g in "
-            f"any unit (9.81 m/s^2, 9807 mm/s^2 or 1 g); the sensor must rest with gravity "
-            f"along one axis: name that axis with --gravity-axis, or check the data"
+            f"any unit (9.81 m/s^2, 9807 mm/s^2, 1 g or 1000 mg); the sensor must rest with "
+            f"gravity along one axis: name that axis with --gravity-axis, or check the data"
         )
-    if looks[0] != unit:
-        fix = _SUGGEST.get(looks[0], "convert to m/s^2")
+    found = looks[0]
+    if found != unit:
+        if found in _FORMAT_OF:
+            fix = f"use --format {_FORMAT_OF[found]}"
+        else:  # no format reads it: the data must be scaled
+            factor = dict(_UNITS)[unit] / dict(_UNITS)[found]
+            fix = f"convert the data to {unit} (multiply by {factor:.6g})"
         raise RecordingError(
             f"{path}: gravity axis {name} reads {reading:.4g} on average: this looks like "
-            f"{looks[0]}, but format {fmt!r} expects {unit}; use {fix} or convert"
+            f"{found}, but format {fmt!r} expects {unit}; {fix}"
         )
     return name
 
