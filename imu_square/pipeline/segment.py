@@ -40,6 +40,8 @@ _MAX_PHASE_DEVIATION = 0.5
 _MAX_OFF_CIRCLE = 0.2
 # A circle's acceleration magnitude is constant; a robust spread above this is not a circle.
 _MAX_ENVELOPE_SPREAD = 0.25
+# Below this share of v^2/r the envelope's highest level is no circle but rest.
+_REST_SHARE = 0.2
 # Samples kept away from motion when estimating the rest level.
 _REST_PAD = 50
 # Above this condition number of its Gram matrix the phase fit is solved by lstsq:
@@ -512,6 +514,16 @@ def match_blocks(motion, program, events=()):
     t_start, t_stop = motion.t_start, motion.t_stop
     chosen = _select(motion, plans, events_t, nominal)
     if chosen is None:
+        # The threshold is half the envelope's level where it is highest: a table at
+        # rest reaches only its noise there, far below the circles' v^2/r.
+        level = 2 * motion.threshold_m_s2
+        if level < _REST_SHARE * program.centripetal_m_s2:
+            raise AnalysisError(
+                f"no motion: the horizontal acceleration stays within {level:.2g} m/s^2 of "
+                f"its rest level, while the program's circles reach v^2/r = "
+                f"{program.centripetal_m_s2:.3g} m/s^2: the table did not move during the "
+                f"recording (was the program run, at this feed?)"
+            )
         longest = max((b - a for a, b in zip(t_start, t_stop, strict=True)), default=0.0)
         raise AnalysisError(
             f"no circular motion matching the program: expected {len(plans)} blocks of about "
