@@ -150,6 +150,8 @@ def test_other_settings_into_another_history_and_compare(archive, capsys):
     u = float(np.median([p["a_u_squareness_urad"] for p in both]))
     assert np.std(diff, ddof=1) < u and abs(np.mean(diff)) < u
     assert "100 recordings in both, 0 only in A, 0 only in B" in out.err
+    # an invalid run has no squareness: a dash, never "+nan"
+    assert "nan" not in out.err and out.err.count("  –  ") >= 3
 
 
 @pytest.mark.slow

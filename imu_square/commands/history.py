@@ -1,6 +1,7 @@
 """``imu-square history``: a machine's runs and verdicts, its trend chart, a back-up."""
 
 import json
+import math
 import sys
 from dataclasses import replace
 from datetime import UTC, datetime
@@ -139,8 +140,8 @@ def _compare(args):
         if math.isfinite(va) and math.isfinite(vb):
             diffs.append(vb - va)
         print(
-            f"{iso(ra.recorded_at_ns):20}  {va:+9.2f}  {vb:+9.2f}  {vb - va:+7.2f}  {sa:14}  "
-            f"{sb:14}",
+            f"{iso(ra.recorded_at_ns):20}  {_cell(va, 9)}  {_cell(vb, 9)}  {_cell(vb - va, 7)}  "
+            f"{sa:14}  {sb:14}",
             file=sys.stderr,
         )
         if args.json:
@@ -172,6 +173,11 @@ def _compare(args):
         text += f"; B − A: mean {np.mean(d):+.2f}{sd}, largest {np.max(np.abs(d)):.2f} µm/m"
     print(text, file=sys.stderr)
     return 0
+
+
+def _cell(value, width):
+    """A signed value to 2 decimals, or a dash for an invalid run's missing one."""
+    return f"{value:+{width}.2f}" if math.isfinite(value) else f"{'–':>{width}}"
 
 
 def _urad(x):
