@@ -112,3 +112,34 @@ def test_systemd_units_broken_on_purpose_are_caught(tmp_path):
         ["systemd-analyze", "verify", str(tmp_path / name)], capture_output=True, text=True
     )
     assert "Failed to parse service type" in proc.stderr
+
+
+def test_nightly_check_of_a_new_monitor_makes_no_history(tmp_path, capsys):
+    monitor = tmp_path / "mill-3.toml"
+    history = tmp_path / "histories" / "mill-3.db"
+    (tmp_path / "histories").mkdir()
+    argv = ["init", "--machine-id", "mill-3", "-o", str(monitor), "--history", str(history)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main(["nightly", "--config", str(monitor), "--check"]) == 0
+    assert "not made yet: the first night makes it" in capsys.readouterr().err
+    assert not history.exists(), "a check must not create the history it checks"
+    # a history whose folder is missing is a mistake the check finds
+    shutil.rmtree(tmp_path / "histories")
+    assert main(["nightly", "--config", str(monitor), "--check"]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_outputs_under_a_missing_mount_point_are_refused_not_made(tmp_path, capsys):
+    monitor = tmp_path / "mill-3.toml"
+    argv = ["init", "--machine-id", "mill-3", "-o", str(monitor), "--history", "h.db"]
+    assert main(argv) == 0
+    share = tmp_path / "mnt" / "share"  # not mounted: the folder is missing
+    text = monitor.read_text().replace('data_dir = ""', f'data_dir = "{share / "mill-3"}"')
+    monitor.write_text(text)
+    capsys.readouterr()
+    for extra in (["--check"], []):
+        assert main(["nightly", "--config", str(monitor), *extra]) == 2
+        err = capsys.readouterr().err
+        assert "cannot create the data folder" in err and "does not exist (not mounted?)" in err
+    assert not (tmp_path / "mnt").exists()

@@ -255,9 +255,19 @@ def run_monitor(args, config=None):
     config = config or read_monitor(args.config)
     program = config.test_program() or read_program(data_path("program_paper.toml"))
     out = Path(args.out) if args.out else config.output_dir()
-    _check_night(config, out, not args.recording)  # before the machine runs or anything is stored
+    # Before the machine runs or anything is stored; a check makes nothing.
+    _check_night(config, out, not args.recording, make=not args.check)
     if args.recording and not Path(args.recording).is_file():
         raise ImuSquareError(f"{args.recording}: no such recording")
+    if args.check and _not_made_yet(config.history_location()):
+        print(
+            f"{config.path}: machine {config.machine_id}, history "
+            f"{config.history_location()} (not made yet: the first night makes it), program "
+            f"{config.program or 'the paper test'}, sensor {config.sensor.port}, outputs in "
+            f"{out}: ok",
+            file=sys.stderr,
+        )
+        return 0
     with open_history(config.history_location()) as history:
         if args.check:
             print(
@@ -307,19 +317,30 @@ def run_monitor(args, config=None):
     return code if code == 4 else EXIT_CODES[outcome.state]
 
 
-def _check_night(config, out, recording):
+def _not_made_yet(location):
+    """Whether a SQLite history does not exist yet; its folder must take it (checked, not made)."""
+    from imu_square.io.output import check_output_path
+    from imu_square.monitor.history.store import is_postgres_url
+
+    if is_postgres_url(location) or Path(location).exists():
+        return False
+    check_output_path(location)
+    return True
+
+
+def _check_night(config, out, recording, make=True):
     """Everything the night will need, checked before it starts: one line if not."""
     from imu_square.errors import ConfigError
     from imu_square.monitor.publish import ensure_folder
     from imu_square.simulate import read_machine, read_sensor
 
-    ensure_folder(out, "data")
+    ensure_folder(out, "data", make)
     if config.metrics is not None and config.metrics.textfile is not None:
-        ensure_folder(Path(config.metrics.textfile).parent, "metrics")
+        ensure_folder(Path(config.metrics.textfile).parent, "metrics", make)
     for sink in config.alerts.sinks:
         path = getattr(sink, "path", None)
         if path is not None:
-            ensure_folder(Path(path).parent, f"{sink.name} alert")
+            ensure_folder(Path(path).parent, f"{sink.name} alert", make)
     if config.sensor.emulated:
         for field, path, read in (
             ("machine", config.emulated.machine, read_machine),

@@ -36,8 +36,11 @@ class NightFiles:
     alerts: object
 
 
-def ensure_folder(folder, what):
-    """Create ``folder`` if needed and check a file can be written in it, before any work.
+def ensure_folder(folder, what, make=True):
+    """Make ``folder`` if needed and check a file can be written in it, before any work.
+
+    Only the folder itself is made, never its parents: a path under a share
+    that is not mounted must fail, not fill the local disk.
 
     Parameters
     ----------
@@ -45,6 +48,9 @@ def ensure_folder(folder, what):
         The folder.
     what : str
         What goes there, for the message (e.g. ``"data"``).
+    make : bool
+        Make a missing folder; False only checks that it could be made
+        (``nightly --check``).
 
     Returns
     -------
@@ -59,12 +65,19 @@ def ensure_folder(folder, what):
     from imu_square.io.output import check_output_path
 
     folder = Path(folder)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(
-            f"{folder}: cannot create the {what} folder: {exc.strerror or exc}"
-        ) from None
+    if not folder.is_dir():
+        if not folder.parent.is_dir():
+            why = "is not a folder" if folder.parent.exists() else "does not exist (not mounted?)"
+            raise OutputError(f"{folder}: cannot create the {what} folder: {folder.parent} {why}")
+        if not make:
+            check_output_path(folder.parent / ".imu-square-probe", overwrite=True)
+            return folder
+        try:
+            folder.mkdir()
+        except OSError as exc:
+            raise OutputError(
+                f"{folder}: cannot create the {what} folder: {exc.strerror or exc}"
+            ) from None
     check_output_path(folder / ".imu-square-probe", overwrite=True)
     return folder
 
