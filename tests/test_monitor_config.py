@@ -21,7 +21,7 @@ def test_minimal_file_takes_the_defaults(tmp_path):
     c = read_monitor(_write(tmp_path, MINIMAL))
     assert c.machine_id == "m1" and c.sensor.emulated and c.sensor.trigger == "marker"
     assert c.program is None and c.history == "" and c.metrics is None
-    assert c.analysis.options().cutoff_hz == 4.0
+    assert c.analysis.options().cutoff_hz is None  # follows the program, as analyze
     assert c.alarms.step_rad == pytest.approx(10e-6)
 
 

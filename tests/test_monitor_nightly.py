@@ -381,3 +381,24 @@ def test_the_trend_chart_keeps_an_earlier_baselines_alarm_and_its_climb(rig, cap
         plot_trend(assessment, rig / "trend.png")
     assert len(drawn["ewma"]) == 2  # one EWMA line for each baseline's period
     assert len(drawn["starts"]) == 2  # a start mark for each baseline
+
+
+def test_a_baseline_of_another_test_is_refused_naming_both_programs(tmp_path, capsys):
+    # The monitor file names no program: the paper's test. Recordings of the rig's
+    # r = 25 mm circle used to be accepted, and every later night was then invalid.
+    text = (
+        '[monitor]\nmachine_id = "m1"\nhistory = "history.db"\ndata_dir = "data"\n\n'
+        '[program]\nfile = ""\n\n[analysis]\nbootstrap = 0\n'
+    )
+    (tmp_path / "monitor.toml").write_text(text)
+    runs = [str(night(tmp_path, d)) for d in range(3)]
+    code = main(["baseline", "set", "--config", str(tmp_path / "monitor.toml"), *runs])
+    err = [line for line in capsys.readouterr().err.splitlines() if "schema" not in line]
+    assert code == 2 and len(err) == 1
+    assert (
+        "the recording's program differs from the monitor's: r = 25 mm at 9000 mm/min, 5 "
+        "cycles each way ran, the monitor's is r = 100 mm at 6000 mm/min, 15 cycles each way"
+        in err[0]
+    )
+    with open_history(tmp_path / "history.db") as history:
+        assert history.runs("m1") == [] and history.current_baseline("m1") is None

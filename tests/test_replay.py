@@ -108,8 +108,10 @@ def test_the_same_history_whatever_the_engine_and_the_alarm_night(archive, capsy
     assert summary["counts"] == {"analysed": 0, "invalid": 0, "skipped": 100, "failed": 0}
     fired = summary["alarm_nights"]
     assert fired, "a 15 µm/m step (6 sigma) must be found"
+    # Four cycles a night give u 3 degrees of freedom: the design (Student's t) finds a
+    # 15 µm/m step after 3 nights (median), 90 % within 5 (design_alarms' check).
     first_alarm = (START + timedelta(days=STEP_NIGHT)).strftime("%Y-%m-%d")
-    last_alarm = (START + timedelta(days=STEP_NIGHT + 3)).strftime("%Y-%m-%d")
+    last_alarm = (START + timedelta(days=STEP_NIGHT + 4)).strftime("%Y-%m-%d")
     assert first_alarm <= fired[0][:10] <= last_alarm, fired
     assert all(night[:10] >= first_alarm for night in fired), "no false alarm before the step"
     # fresh histories of the first 40 nights with one process, two, and Dask: identical

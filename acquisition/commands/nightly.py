@@ -243,8 +243,6 @@ def run_monitor(args, config=None):
     from imu_square.monitor.night import judge_recording
     from imu_square.monitor.publish import write_night_outputs
     from imu_square.monitor.schedule import EXIT_CODES
-    from imu_square.program import read_program
-    from imu_square.simulate import data_path
 
     given = [f"--{f.replace('_', '-')}" for f in _SINGLE_RUN_FLAGS if getattr(args, f)]
     if given:
@@ -253,7 +251,7 @@ def run_monitor(args, config=None):
             f"sensor is and which program runs"
         )
     config = config or read_monitor(args.config)
-    program = config.test_program() or read_program(data_path("program_paper.toml"))
+    program = config.test_program()
     out = Path(args.out) if args.out else config.output_dir()
     # Before the machine runs or anything is stored; a check makes nothing.
     _check_night(config, out, not args.recording, make=not args.check)
@@ -278,14 +276,13 @@ def run_monitor(args, config=None):
                 file=sys.stderr,
             )
             return 0
-        complete = True
         code = 0
         if args.recording:
             path = Path(args.recording).resolve()
         else:
             stem = out / f"{config.machine_id}-{time.strftime('%Y%m%d-%H%M%S')}"
             emu = config.emulated
-            path, status, code, _ = _record(
+            path, _, code, _ = _record(
                 stem,
                 program,
                 port=None if config.sensor.emulated else config.sensor.port,
@@ -296,8 +293,7 @@ def run_monitor(args, config=None):
                 quiet=args.quiet,
                 header_timeout_s=config.sensor.header_timeout_s,
             )
-            complete = status.complete
-        outcome = judge_recording(config, history, path, program, complete, alert=True)
+        outcome = judge_recording(config, history, path, program, alert=True)
         files = write_night_outputs(config, history, outcome, out)
     for name, value in (("trend chart", files.trend_png), ("report", files.report_html)):
         if value is not None:

@@ -10,7 +10,7 @@ from imu_square.io.csv import FORMATS, GRAVITY_AXES, read_csv
 from imu_square.io.mcap import write_mcap
 from imu_square.io.recording import SensorInfo
 from imu_square.io.times import parse_start_time
-from imu_square.program import TestProgram, read_program
+from imu_square.program import read_program
 from imu_square.units import UG, G
 
 HELP = "convert a CSV recording to MCAP"
@@ -100,7 +100,7 @@ def run(args):
             )
         machine_id = config.machine_id
         if program_path is None:
-            program = config.test_program() or TestProgram()
+            program = config.test_program()
     if program_path is not None:
         program = read_program(program_path)
     elif args.config is None:

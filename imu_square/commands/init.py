@@ -25,6 +25,12 @@ def register(sub):
         "--port", default="emulated", help="the sensor board's serial port (default: emulated)"
     )
     p.add_argument("--history", default="", help="history file or postgresql:// URL")
+    p.add_argument(
+        "--program",
+        metavar="PROGRAM.toml",
+        help="the circle test the machine runs (default: the paper's test); the analysis "
+        "settings a plan file (imu-square plan -o) carries come with it",
+    )
     p.add_argument("--at", default="02:30", help="local time of the nightly run, HH:MM")
     p.add_argument("--user", help="account the systemd service runs as (a system unit)")
     p.add_argument("--systemd", metavar="DIR", help="write the service and timer into DIR")
@@ -48,7 +54,23 @@ def run(args):
         from imu_square.monitor.publish import ensure_folder
 
         ensure_folder(Path(args.systemd).expanduser(), "systemd units")
-    text = monitor_file_text(args.machine_id, port=args.port, history=args.history)
+    program, analysis = "", None
+    if args.program:
+        from imu_square.monitor.config import AnalysisSettings
+        from imu_square.program import read_program
+
+        given = Path(args.program).expanduser().absolute()
+        if read_program(given).n_feeds > 1:
+            raise ImuSquareError(
+                f"{given}: runs several feeds; the monitor judges a one-feed test night to "
+                "night (imu-square plan without --separate-gravity)"
+            )
+        analysis = AnalysisSettings.of_program_file(given)
+        # Beside the monitor file it is named relative to it, as the monitor file reads it.
+        program = str(given.relative_to(out.parent) if given.parent == out.parent else given)
+    text = monitor_file_text(
+        args.machine_id, port=args.port, history=args.history, program=program, analysis=analysis
+    )
     tmp = out.with_name(f".{out.name}.tmp")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)

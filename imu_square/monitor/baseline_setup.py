@@ -12,7 +12,7 @@ import math
 
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.history.rows import AnchorRow, BaselineRow
-from imu_square.monitor.night import analyse_recording, run_row, stored_design
+from imu_square.monitor.night import recording_row, stored_design
 from imu_square.monitor.stats.baseline import BaselineError, compute_baseline
 from imu_square.monitor.verdict import run_value
 from imu_square.units import MM, URAD
@@ -60,8 +60,7 @@ def runs_for_baseline(config, history, items, program=None):
                 raise BaselineError(f"run {item} is not in the history") from None
         else:
             path = Path(item).absolute()
-            recording, result, reason = analyse_recording(config, path, program)
-            row = run_row(config, path, recording, result, reason)
+            row, _ = recording_row(config, path, program)
             stored = history.run_by_hash(config.machine_id, row.recording_sha256, row.settings_hash)
             row = stored or row
         where = row.recording_path if row.id is None else f"run {row.id} ({row.recording_path})"

@@ -26,7 +26,7 @@ file, as ``imu-square init`` writes it::
     file = ""                    # the circle test's program file; "" = the paper's test
 
     [analysis]
-    cutoff_hz = 4.0
+    # cutoff_hz = 4.0            # unset: 8 pi x the program's circle frequency, as analyze
     order = 1
     bootstrap = 200
 
@@ -141,15 +141,16 @@ class AnalysisSettings:
 
     Attributes
     ----------
-    cutoff_hz : float
-        Low-pass cutoff. [Hz]
+    cutoff_hz : float or None
+        Low-pass cutoff; None follows the program, 8 pi x its circle
+        frequency, as ``imu-square analyze`` does. [Hz]
     order : int
         Low-pass order.
     bootstrap : int
         Bootstrap resamples (0 to skip, else at least 2).
     """
 
-    cutoff_hz: float = 4.0
+    cutoff_hz: float | None = None
     order: int = 1
     bootstrap: int = 200
 
@@ -166,12 +167,34 @@ class AnalysisSettings:
         -------
         AnalysisSettings
         """
-        cutoff_hz = table.number("cutoff_hz", 0.0, 1000.0, lo_open=True, default=4.0)
+        cutoff_hz = None
+        if table.has("cutoff_hz"):
+            cutoff_hz = table.number("cutoff_hz", 0.0, 1000.0, lo_open=True)
         order = table.integer("order", 1, 8, default=1)
         bootstrap = table.integer("bootstrap", 0, 10_000, default=200)
         if bootstrap == 1:  # one resample has no spread
             table.fail("bootstrap", "0 (no bootstrap) or a whole number in [2, 10000]", 1)
         return cls(cutoff_hz=cutoff_hz, order=order, bootstrap=bootstrap)
+
+    @classmethod
+    def of_program_file(cls, path):
+        """The ``[analysis]`` a program file carries (``imu-square plan -o`` writes one).
+
+        Parameters
+        ----------
+        path : str or Path
+            The program file.
+
+        Returns
+        -------
+        AnalysisSettings or None
+            None when the file has no ``[analysis]`` table.
+        """
+        doc = read_toml(path, MonitorConfigError)
+        if "analysis" not in doc:
+            return None
+        fields = ("cutoff_hz", "order", "bootstrap")
+        return cls.from_table(TomlTable(doc["analysis"], "[analysis]", fields, str(path)))
 
     def options(self):
         """The pipeline's :class:`~imu_square.pipeline.options.AnalysisOptions`."""
@@ -220,11 +243,11 @@ class MonitorConfig:
     metrics: MetricsConfig | None = None
 
     def test_program(self):
-        """The program the monitor expects, read from :attr:`program`; None for the paper's test.
+        """The program the monitor expects: read from :attr:`program`, else the paper's test.
 
         Returns
         -------
-        TestProgram or None
+        TestProgram
 
         Raises
         ------
@@ -233,10 +256,11 @@ class MonitorConfig:
             ``theta_y - theta_x`` night to night, and a night of a two-feed
             program would be recorded only to be refused.
         """
-        if self.program is None:
-            return None
-        from imu_square.program import read_program
+        from imu_square.program import TestProgram, read_program
         from imu_square.units import MM_PER_MIN
+
+        if self.program is None:
+            return TestProgram()
 
         program = read_program(self.program)
         if program.n_feeds > 1:

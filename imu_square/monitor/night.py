@@ -64,7 +64,7 @@ def analysis_settings(config):
     return {"analysis": asdict(config.analysis.options()), "software": __version__}
 
 
-def run_row(config, path, recording=None, result=None, reason=None, sha256=None):
+def run_row(config, path, recording=None, result=None, reason=None, sha256=None, notes=()):
     """The history row of one recording, valid or invalid.
 
     Parameters
@@ -81,6 +81,8 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None)
         Why the run is invalid.
     sha256 : str, optional
         The file's SHA-256, when the caller has it already.
+    notes : sequence of str
+        What the reading found missing; they lead the run's warnings.
 
     Returns
     -------
@@ -130,15 +132,19 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None)
         cycles_ccw=result.cycles_used["ccw"],
         cycles_cw=result.cycles_used["cw"],
         quality={k: v for k, v in doc["quality"].items() if k != "warnings"},
-        warnings=tuple(result.quality["warnings"]),
+        warnings=(*notes, *result.quality["warnings"]),
         per_cycle=per_cycle,
         result=doc,
         **temps,
     )
 
 
-def analyse_recording(config, path, program=None, complete=True):
+def analyse_recording(config, path, program=None):
     """Read and analyse a recording, or say in one line why it cannot be trusted.
+
+    A recording with samples lost (gaps, a board gone before the end, a file
+    cut short) is judged whenever the analysis accepts it: what was lost is
+    noted with the night. Only a run the analysis refuses is invalid.
 
     Parameters
     ----------
@@ -148,8 +154,6 @@ def analyse_recording(config, path, program=None, complete=True):
         The recording.
     program : TestProgram, optional
         The program the monitor expects; a recording of another program is invalid.
-    complete : bool
-        False when the recorder said the recording is incomplete.
 
     Returns
     -------
@@ -157,6 +161,9 @@ def analyse_recording(config, path, program=None, complete=True):
     result : RunResult or None
     reason : str or None
         Why the run is invalid; None when it is valid.
+    notes : tuple of str
+        What the reading found missing (a cut file, a lost end of the run),
+        one line each.
     """
     import warnings
 
@@ -168,12 +175,9 @@ def analyse_recording(config, path, program=None, complete=True):
             warnings.simplefilter("always")
             recording = read_mcap(path)
     except ImuSquareError as exc:
-        return None, None, first_line(exc)
-    cut = [str(w.message) for w in caught if "incomplete MCAP file" in str(w.message)]
-    if cut:
-        return recording, None, first_line(cut[0])
-    if not complete:
-        return recording, None, "the recorder reported an incomplete recording"
+        return None, None, first_line(exc), ()
+    # read_mcap names the file; the night's row names it already
+    notes = tuple(first_line(w.message).removeprefix(f"{path}: ") for w in caught)
     recorded = recording.program
     if recorded is not None and recorded.n_feeds > 1:
         feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in recorded.feeds)
@@ -182,13 +186,10 @@ def analyse_recording(config, path, program=None, complete=True):
             None,
             f"the recording runs {recorded.n_feeds} feeds ({feeds} mm/min): the monitor judges a "
             "one-feed test (analyse it with 'imu-square analyze --separate-gravity')",
+            notes,
         )
     if program is not None and recording.program is not None and recording.program != program:
-        return (
-            recording,
-            None,
-            ("the recording's program differs from the monitor's: another circle test ran"),
-        )
+        return recording, None, program_mismatch(recording.program, program), notes
     recorded_on = recording.machine_id
     if recording.metadata.get("producer") == "imu-square record" and recorded_on not in (
         "",
@@ -197,13 +198,46 @@ def analyse_recording(config, path, program=None, complete=True):
         return (
             recording,
             None,
-            (f"the recording was made on machine {recorded_on!r}, not {config.machine_id!r}"),
+            f"the recording was made on machine {recorded_on!r}, not {config.machine_id!r}",
+            notes,
         )
     try:
         result = analyze(recording, config.analysis.options(), program=program)
     except AnalysisError as exc:
-        return recording, None, first_line(exc)
-    return recording, result, None
+        return recording, None, first_line(exc), notes
+    return recording, result, None, notes
+
+
+def recording_row(config, path, program=None, sha256=None):
+    """A recording read, analysed and made into its history row, valid or invalid.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file.
+    path : str or Path
+        The recording.
+    program : TestProgram, optional
+        The program the monitor expects.
+    sha256 : str, optional
+        The file's SHA-256, when the caller has it already.
+
+    Returns
+    -------
+    row : RunRow
+    result : RunResult or None
+        The analysis; None for an invalid run.
+    """
+    recording, result, reason, notes = analyse_recording(config, path, program)
+    return run_row(config, path, recording, result, reason, sha256, notes), result
+
+
+def program_mismatch(recorded, expected):
+    """Why a recording of another circle test is not the monitor's: both named, one line."""
+    return (
+        f"the recording's program differs from the monitor's: {recorded.describe()} ran, "
+        f"the monitor's is {expected.describe()}"
+    )
 
 
 def stored_design(history, baseline_row, settings):
@@ -274,7 +308,7 @@ def _earlier_periods(config, history, current):
     return tuple(periods)
 
 
-def judge_recording(config, history, path, program=None, complete=True, alert=False):
+def judge_recording(config, history, path, program=None, alert=False):
     """Analyse, store and judge one night's recording.
 
     The run, its verdict and, with ``alert``, the night's alert for each sink
@@ -292,8 +326,6 @@ def judge_recording(config, history, path, program=None, complete=True, alert=Fa
         The night's recording.
     program : TestProgram, optional
         The program the monitor expects.
-    complete : bool
-        False when the recorder reported an incomplete recording.
     alert : bool
         Keep the night's alert in the outbox (a seeded past night has none).
 
@@ -301,8 +333,7 @@ def judge_recording(config, history, path, program=None, complete=True, alert=Fa
     -------
     NightOutcome
     """
-    recording, result, reason = analyse_recording(config, path, program, complete)
-    row = run_row(config, path, recording, result, reason)
+    row, result = recording_row(config, path, program)
     with history.transaction():
         run_id, inserted = history.add_run(row)
         assessment = judge_history(config, history)

@@ -174,7 +174,7 @@ def replay_file(path, job, known=frozenset()):
     -------
     FileOutcome
     """
-    from imu_square.monitor.night import analyse_recording, run_row
+    from imu_square.monitor.night import recording_row
 
     start = time.perf_counter()
     local, temporary = None, None
@@ -183,13 +183,12 @@ def replay_file(path, job, known=frozenset()):
         sha = _sha256_local(local)
         if sha in known:
             return FileOutcome(path, "skipped", sha, seconds=time.perf_counter() - start)
-        recording, result, reason = analyse_recording(job, local, job.program)
-        row = run_row(job, local, recording, result, reason, sha256=sha)
+        row, result = recording_row(job, local, job.program, sha)
         values = {f.name: getattr(row, f.name) for f in fields(RunRow)}
         values["recording_path"] = path
         status = "analysed" if result is not None else "invalid"
         return FileOutcome(
-            path, status, sha, values, reason or "", seconds=time.perf_counter() - start
+            path, status, sha, values, row.invalid_reason or "", seconds=time.perf_counter() - start
         )
     except (OSError, ImuSquareError) as exc:
         return FileOutcome(

@@ -58,12 +58,12 @@ uptime_s = 18000.0
 
 [program]
 # The circle test the machine runs (imu-square program writes its NC code); "" = the paper's test.
-file = ""
+file = {program_toml}
 
 [analysis]
-cutoff_hz = 4.0
-order = 1
-bootstrap = 200
+# The analysis of every night; a baseline is of one set of settings. Unset, the low-pass
+# cutoff follows the program: 8 pi x its circle frequency, as imu-square analyze.
+{analysis}
 
 [alarms]
 # The false-alarm rate you accept: one false alarm in this many nights.
@@ -90,7 +90,9 @@ def _toml_string(text):
     return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def monitor_file_text(machine_id, port="emulated", history="", trigger=None):
+def monitor_file_text(
+    machine_id, port="emulated", history="", trigger=None, program="", analysis=None
+):
     """The commented monitor file ``init`` writes.
 
     Parameters
@@ -103,12 +105,22 @@ def monitor_file_text(machine_id, port="emulated", history="", trigger=None):
         History location; "" for the per-user default.
     trigger : str, optional
         ``"marker"`` for the emulated board, ``"motion"`` for a real port unless given.
+    program : str
+        The program file; "" for the paper's test.
+    analysis : AnalysisSettings, optional
+        The analysis the program was planned for; the defaults if None.
 
     Returns
     -------
     str
     """
+    from imu_square.monitor.config import AnalysisSettings
+
     trigger = trigger or ("marker" if port == "emulated" else "motion")
+    analysis = analysis or AnalysisSettings()
+    cutoff = (
+        "# cutoff_hz = 4.0" if analysis.cutoff_hz is None else f"cutoff_hz = {analysis.cutoff_hz!r}"
+    )
     return MONITOR_TEMPLATE.format(
         machine_id=machine_id,
         machine_id_toml=_toml_string(machine_id),
@@ -116,6 +128,8 @@ def monitor_file_text(machine_id, port="emulated", history="", trigger=None):
         history_toml=_toml_string(history),
         port_toml=_toml_string(port),
         trigger_toml=_toml_string(trigger),
+        program_toml=_toml_string(program),
+        analysis=f"{cutoff}\norder = {analysis.order}\nbootstrap = {analysis.bootstrap}",
     )
 
 

@@ -317,6 +317,7 @@ def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
             charted, changes, chart_run.points, strict=True
         ):
             notes = ["corrected for the sensor's thermal drift"] if corrected else []
+            notes += _losses(r)
             state = point.state
             if alarm_since is not None:
                 state = "alarm"
@@ -333,6 +334,13 @@ def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
         tuple(nights[r.id] for r in runs),
         tuple(anchors),
     )
+
+
+def _losses(row):
+    """What a judged night lost, for its note: samples in gaps (a board gone included)."""
+    quality = row.quality or {}
+    lost = quality.get("lost_samples") or 0
+    return [f"{lost} samples lost in {quality.get('gaps', 0)} gap(s)"] if lost else []
 
 
 def _serial(row):

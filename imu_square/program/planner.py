@@ -90,10 +90,6 @@ MAX_CIRCLE_SAMPLE_FRACTION = 1 / 50
 # (the analysis merges blocks that rest less than a tenth of a period). [s]
 MIN_DWELL_S = 1.0
 DWELL_PERIODS = 0.2
-# The analysis' low-pass: at least the paper's 4 Hz, and this many times the
-# circle frequency so that the filter does not shape the circle. [Hz]
-MIN_CUTOFF_HZ = 4.0
-CUTOFF_PER_CIRCLE_HZ = 5.0
 # Ratios of the slow feed's v^2/r to the fast one's tried with two feeds.
 SLOW_SHARES = (0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5)
 # Radii tried (and the largest the travel allows). [mm]
@@ -279,7 +275,8 @@ class Plan:
     analysed_s : float
         Time in the analysed whole cycles, all feeds and directions. [s]
     cutoff_hz : float
-        Low-pass cutoff to analyse the run with. [Hz]
+        The analysis' default low-pass cutoff for the fastest circle, 8 pi x
+        its frequency, which the prediction assumes. [Hz]
     time_to_detect_s : float or None
         Machine time this circle, at these feeds, needs to detect
         ``goal.change_rad`` (more or fewer cycles); None without a goal or when
@@ -426,7 +423,10 @@ class Plan:
                     f"  target {target}: NOT detected by {test}; this circle needs "
                     f"{self.time_to_detect_s:.0f} s"
                 )
-        lines.append(f"  analyse with --cutoff-hz {self.cutoff_hz:g}")
+        lines.append(
+            f"  analysed with the analysis' defaults: low-pass {self.cutoff_hz:.3g} Hz, 8 pi x "
+            f"the circle frequency (the plan file's [analysis] keeps them for the monitor)"
+        )
         return "\n".join(lines)
 
     def _monitor_lines(self):
@@ -460,9 +460,17 @@ class Plan:
             ),
             f"#   one night's two-sided {self.goal.confidence:.0%} test detects "
             f"{self.detectable_change_rad / URAD:.1f} um/m; {self.duration_s:.0f} s on the machine",
-            f"#   analyse with --cutoff-hz {self.cutoff_hz:g}",
         ]
-        return "\n".join(head) + "\n" + self.program.to_toml()
+        analysis = [
+            "",
+            "# The analysis the prediction assumes; imu-square init --program takes it into",
+            "# the monitor file. cutoff_hz unset: 8 pi x the circle frequency "
+            f"({self.cutoff_hz:.3g} Hz here).",
+            "[analysis]",
+            "order = 1",
+            "bootstrap = 200",
+        ]
+        return "\n".join(head) + "\n" + self.program.to_toml() + "\n".join(analysis) + "\n"
 
 
 def _feed_terms(program, sensor, efficiency):
@@ -549,9 +557,11 @@ def analysed_time_s(program):
 
 
 def _cutoff(program, sensor):
+    """The analysis' default low-pass for the fastest circle: the plan predicts for it."""
+    from imu_square.pipeline.filter import circle_cutoff_hz
+
     fastest = max(program.at_feed(f).frequency_hz for f in range(program.n_feeds))
-    cutoff = max(MIN_CUTOFF_HZ, math.ceil(CUTOFF_PER_CIRCLE_HZ * fastest))
-    return float(min(cutoff, 0.45 * sensor.sample_rate_hz))
+    return circle_cutoff_hz(fastest, sensor.sample_rate_hz)
 
 
 def _dwell(periods):

@@ -322,6 +322,15 @@ class TestProgram:
                     t += block_s + self.dwell_s
         return plans
 
+    def describe(self):
+        """The circle in a few words: radius, feed(s) and cycles each way."""
+        from imu_square.units import MM, MM_PER_MIN
+
+        feeds = " and ".join(f"{v / MM_PER_MIN:g}" for v in self.feeds)
+        cycles = " and ".join(str(n) for n in self.feed_cycles)
+        runs = f", {self.runs} runs" if self.runs > 1 else ""
+        return f"r = {self.radius_m / MM:g} mm at {feeds} mm/min, {cycles} cycles each way{runs}"
+
     def to_mapping(self):
         """The program as a ``[program]`` table in file units (mm, mm/min, degrees)."""
         if self.n_feeds > 1:
