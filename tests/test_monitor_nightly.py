@@ -402,3 +402,32 @@ def test_a_baseline_of_another_test_is_refused_naming_both_programs(tmp_path, ca
     )
     with open_history(tmp_path / "history.db") as history:
         assert history.runs("m1") == [] and history.current_baseline("m1") is None
+
+
+@pytest.mark.slow
+def test_an_invalid_night_after_an_alarm_reports_the_alarm_too(rig, capsys):
+    # An alarm stands until a new baseline is set: a cut recording after it is an
+    # invalid night, and the verdict, the alert, the metrics, the report and the exit
+    # code all still say the machine is in alarm.
+    config = rig / "monitor.toml"
+    text = config.read_text() + '\n[metrics]\ntextfile = "data/m1.prom"\n'
+    config.write_text(text)
+    for day in range(5, 12):
+        code, record = judge(config, night(rig, day, alpha=ALPHA + 15e-6), capsys)
+        if record["state"] == "alarm":
+            break
+    assert record["state"] == "alarm", "a 6-sigma step must alarm within a week"
+    fired = record["recorded_at"][:10]
+    cut = rig / "cut.mcap"
+    cut.write_bytes(night(rig, 12).read_bytes()[:20_000])
+    code, record = judge(config, cut, capsys)
+    assert record["state"] == "invalid" and record["machine_state"] == "alarm"
+    assert code == EXIT_CODES["alarm"]
+    assert record["alarm_since"][:10] == fired
+    assert f"the machine stands in alarm since {fired}" in record["verdict"]
+    alert = json.loads((rig / "data" / "alert.json").read_text())
+    assert alert["state"] == "alarm" and "stands in alarm" in alert["verdict"]
+    metrics = (rig / "data" / "m1.prom").read_text()
+    assert 'imu_square_state{machine_id="m1",state="alarm"} 1' in metrics
+    report = (rig / "data" / "m1-report.html").read_text()
+    assert '<p class="verdict alarm">' in report and "stands in alarm" in report

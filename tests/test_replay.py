@@ -6,6 +6,7 @@ interruption, other analysis settings compared with ``history --compare``.
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -243,3 +244,25 @@ def test_a_dask_worker_killed_mid_replay_loses_and_doubles_no_file(archive):
         time.sleep(0.1)
     assert sorted(o.path for o in outcomes) == sorted(paths)
     assert {o.status for o in outcomes} <= {"analysed", "invalid", "failed"}
+
+
+def test_an_unreadable_file_fails_and_a_copy_is_skipped_naming_each_file_once(tmp_path, capsys):
+    (tmp_path / "program.toml").write_text(PROGRAM.to_toml())
+    (tmp_path / "monitor.toml").write_text(MONITOR)
+    folder = tmp_path / "archive"
+    folder.mkdir()
+    machine = MachineModel(geometry=Geometry(machine_squareness_rad=ALPHA))
+    for day in (0, 1):
+        when = int((START + timedelta(days=day)).timestamp() * 1e9)
+        rec, _ = simulate_run(PROGRAM, machine, SENSOR, seed=day, t0_ns=when, lead_in_s=0.5)
+        write_mcap(rec, folder / f"m1-{day}.mcap")
+    shutil.copy(folder / "m1-1.mcap", folder / "m1-1-copy.mcap")
+    (folder / "notes.mcap").write_text("the sensor was cleaned on Tuesday\n")
+    _replay(tmp_path, str(folder), "--jobs", "1", "--json")
+    out = capsys.readouterr()
+    summary = json.loads(out.out.splitlines()[-1])
+    assert summary["counts"] == {"analysed": 2, "invalid": 0, "skipped": 1, "failed": 1}
+    with open_history(tmp_path / "history.db") as h:
+        assert len(h.runs("m1")) == 2, "the unreadable file is no run, the copy no second one"
+    line = next(x for x in out.err.splitlines() if "notes.mcap" in x)
+    assert line.count("notes.mcap") == 1 and "not an MCAP file" in line

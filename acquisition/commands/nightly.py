@@ -310,7 +310,7 @@ def run_monitor(args, config=None):
     if args.json:
         print(json.dumps(outcome.record))
     # a failed write outranks the verdict: the night must be looked at
-    return code if code == 4 else EXIT_CODES[outcome.state]
+    return code if code == 4 else EXIT_CODES[outcome.record["machine_state"]]
 
 
 def _not_made_yet(location):

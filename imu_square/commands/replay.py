@@ -145,8 +145,9 @@ def run(args):
         progress = _Progress(len(paths), args.json)
         try:
             for outcome in outcomes:
-                if outcome.row is not None:
-                    store_outcome(history, outcome)
+                if outcome.row is not None and not store_outcome(history, outcome)[1]:
+                    # a copy of a recording already stored (in this batch or before)
+                    outcome = replace(outcome, status="skipped")
                 summary.counts[outcome.status] += 1
                 if outcome.status == "invalid":
                     summary.invalid.append((outcome.path, outcome.reason))

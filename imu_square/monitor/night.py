@@ -21,7 +21,7 @@ from imu_square.monitor.alerts.send import queue_alert
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS, EvaluationRow, RunRow
 from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
-from imu_square.monitor.verdict import design_for, iso, judge_runs, verdict
+from imu_square.monitor.verdict import design_for, iso, judge_runs, machine_state, verdict
 from imu_square.units import MM_PER_MIN, URAD
 
 
@@ -139,7 +139,7 @@ def run_row(config, path, recording=None, result=None, reason=None, sha256=None,
     )
 
 
-def analyse_recording(config, path, program=None):
+def analyse_recording(config, path, program=None, keep_unreadable=True):
     """Read and analyse a recording, or say in one line why it cannot be trusted.
 
     A recording with samples lost (gaps, a board gone before the end, a file
@@ -154,6 +154,9 @@ def analyse_recording(config, path, program=None):
         The recording.
     program : TestProgram, optional
         The program the monitor expects; a recording of another program is invalid.
+    keep_unreadable : bool
+        Make a file that cannot be read an invalid run (tonight's recording);
+        False raises instead (a file in an archive may be no recording at all).
 
     Returns
     -------
@@ -175,9 +178,10 @@ def analyse_recording(config, path, program=None):
             warnings.simplefilter("always")
             recording = read_mcap(path)
     except ImuSquareError as exc:
-        return None, None, first_line(exc), ()
-    # read_mcap names the file; the night's row names it already
-    notes = tuple(first_line(w.message).removeprefix(f"{path}: ") for w in caught)
+        if not keep_unreadable:
+            raise
+        return None, None, _about_the_run(exc, path), ()
+    notes = tuple(_about_the_run(w.message, path) for w in caught)
     recorded = recording.program
     if recorded is not None and recorded.n_feeds > 1:
         feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in recorded.feeds)
@@ -204,11 +208,16 @@ def analyse_recording(config, path, program=None):
     try:
         result = analyze(recording, config.analysis.options(), program=program)
     except AnalysisError as exc:
-        return recording, None, first_line(exc), notes
+        return recording, None, _about_the_run(exc, path), notes
     return recording, result, None, notes
 
 
-def recording_row(config, path, program=None, sha256=None):
+def _about_the_run(message, path):
+    """One line about a recording, without its path: the night's row names the file."""
+    return first_line(message).removeprefix(f"{path}: ")
+
+
+def recording_row(config, path, program=None, sha256=None, keep_unreadable=True):
     """A recording read, analysed and made into its history row, valid or invalid.
 
     Parameters
@@ -221,6 +230,8 @@ def recording_row(config, path, program=None, sha256=None):
         The program the monitor expects.
     sha256 : str, optional
         The file's SHA-256, when the caller has it already.
+    keep_unreadable : bool
+        See :func:`analyse_recording`.
 
     Returns
     -------
@@ -228,7 +239,7 @@ def recording_row(config, path, program=None, sha256=None):
     result : RunResult or None
         The analysis; None for an invalid run.
     """
-    recording, result, reason, notes = analyse_recording(config, path, program)
+    recording, result, reason, notes = analyse_recording(config, path, program, keep_unreadable)
     return run_row(config, path, recording, result, reason, sha256, notes), result
 
 
@@ -354,7 +365,7 @@ def judge_recording(config, history, path, program=None, alert=False):
                 history,
                 record,
                 machine_id=config.machine_id,
-                state=night.state,
+                state=record["machine_state"],
                 verdict=line,
             )
     return NightOutcome(run_id, inserted, night.state, line, record, assessment, result, sent)
@@ -403,15 +414,20 @@ def night_record(assessment, night, line):
     Returns
     -------
     dict
-        ``state``, ``verdict``, ``change_urad``, ``u_change_urad``, the run's
-        identity and analysis, the baseline and, when anchored, the absolute
-        machine squareness.
+        ``state`` (the night's), ``machine_state`` (``alarm`` while an alarm
+        stands, else the night's) and ``alarm_since``, ``verdict``,
+        ``change_urad``, ``u_change_urad``, the run's identity and analysis,
+        the baseline and, when anchored, the absolute machine squareness.
     """
     run = night.run
     base = assessment.baseline_row
     record = {
         "machine_id": run.machine_id,
         "state": night.state,
+        "machine_state": machine_state(assessment, night),
+        "alarm_since": None
+        if assessment.alarm_since_ns is None
+        else iso(assessment.alarm_since_ns),
         "verdict": line,
         "change_urad": _urad(night.change_rad),
         "u_change_urad": _urad(night.u_change_rad),

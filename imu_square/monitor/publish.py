@@ -127,7 +127,7 @@ def metrics_snapshot(assessment):
 
     return MetricsSnapshot(
         machine_id=assessment.machine_id,
-        state=latest.state if latest else "no_baseline",
+        state=assessment.state,
         runs=len(nights),
         invalid_runs=len(nights) - len(valid),
         change_rad=judged[-1].change_rad if judged else None,

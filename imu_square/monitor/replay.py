@@ -183,7 +183,8 @@ def replay_file(path, job, known=frozenset()):
         sha = _sha256_local(local)
         if sha in known:
             return FileOutcome(path, "skipped", sha, seconds=time.perf_counter() - start)
-        row, result = recording_row(job, local, job.program, sha)
+        # a file that cannot be read is counted as failed, never stored as a run
+        row, result = recording_row(job, local, job.program, sha, keep_unreadable=False)
         values = {f.name: getattr(row, f.name) for f in fields(RunRow)}
         values["recording_path"] = path
         status = "analysed" if result is not None else "invalid"
@@ -191,9 +192,9 @@ def replay_file(path, job, known=frozenset()):
             path, status, sha, values, row.invalid_reason or "", seconds=time.perf_counter() - start
         )
     except (OSError, ImuSquareError) as exc:
-        return FileOutcome(
-            path, "failed", reason=first_line(exc), seconds=time.perf_counter() - start
-        )
+        # the outcome names the file: its reason need not
+        reason = first_line(exc).removeprefix(f"{local}: ").removeprefix(f"{path}: ")
+        return FileOutcome(path, "failed", reason=reason, seconds=time.perf_counter() - start)
     finally:
         if temporary is not None:
             os.unlink(temporary)

@@ -156,6 +156,9 @@ class Assessment:
     earlier : tuple of Assessment
         Each earlier baseline's own period judged against it, oldest first:
         its runs from its first run until the next baseline's.
+    alarm_since_ns : int or None
+        When the alarm that stands fired (the first alarm night since the
+        current baseline); it stands until a new baseline is set. [ns]
     """
 
     machine_id: str
@@ -164,6 +167,14 @@ class Assessment:
     nights: tuple
     anchors: tuple = field(default=())
     earlier: tuple = field(default=())
+    alarm_since_ns: int | None = None
+
+    @property
+    def state(self):
+        """The machine's state: ``alarm`` while an alarm stands, else its latest night's."""
+        if self.alarm_since_ns is not None:
+            return "alarm"
+        return self.latest.state if self.latest else "no_baseline"
 
     @property
     def latest(self):
@@ -304,6 +315,7 @@ def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
             continue
         charted.append((r, value, drift, corrected))
         changes.append(change)
+    alarm_since = None
     if charted:
         c = abs(baseline.cos_2eps_c)
         chart_run = run_charts(
@@ -312,7 +324,6 @@ def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
             [v.u_squareness_rad / c for _, v, _, _ in charted],
             [float(r.dof) if r.dof else None for r, _, _, _ in charted],
         )
-        alarm_since = None
         for (r, _, drift, corrected), ch, point in zip(
             charted, changes, chart_run.points, strict=True
         ):
@@ -333,6 +344,7 @@ def judge_runs(runs, baseline_row, design, anchors=(), earlier=None):
         design,
         tuple(nights[r.id] for r in runs),
         tuple(anchors),
+        alarm_since_ns=alarm_since,
     )
 
 
@@ -482,6 +494,40 @@ def verdict(assessment, night):
     -------
     str
     """
+    line = _line(assessment, night)
+    if machine_state(assessment, night) != night.state:
+        line += (
+            f"; the machine stands in alarm since {iso(assessment.alarm_since_ns)[:10]}, "
+            f"until a new baseline is set"
+        )
+    return line
+
+
+def machine_state(assessment, night):
+    """The machine's state on a night: ``alarm`` while an alarm stands, else the night's.
+
+    An alarm stands from its night until a new baseline is set, whatever
+    nights come after it: an invalid night then reports the alarm too.
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's assessment.
+    night : Night
+        The night.
+
+    Returns
+    -------
+    str
+    """
+    standing = assessment.alarm_since_ns
+    if standing is None or night.stated:
+        return night.state
+    recorded = night.run.recorded_at_ns
+    return "alarm" if recorded is None or recorded >= standing else night.state
+
+
+def _line(assessment, night):
     if night.stated:
         return night.stated
     since = ""

@@ -73,7 +73,7 @@ def render_report(assessment, last_result=None, last_title="", now=None):
     now = now or datetime.now(UTC)
     machine = assessment.machine_id
     latest = assessment.latest
-    state = latest.state if latest else "no_baseline"
+    state = assessment.state
     line = verdict(assessment, latest) if latest else "no runs yet"
     trend = _png(lambda p: plot_trend(assessment, p))
     sensor = _png(lambda p: plot_sensor(assessment, p))
