@@ -431,3 +431,27 @@ def test_an_invalid_night_after_an_alarm_reports_the_alarm_too(rig, capsys):
     assert 'imu_square_state{machine_id="m1",state="alarm"} 1' in metrics
     report = (rig / "data" / "m1-report.html").read_text()
     assert '<p class="verdict alarm">' in report and "stands in alarm" in report
+
+
+def test_a_recording_of_another_machine_or_of_no_date_is_refused_and_not_stored(rig, capsys):
+    # A recording imported with --machine-id mill-4 used to enter m1's history; one whose
+    # clock counted from power-on was dated 1970 and judged "before the baseline".
+    from imu_square.io.mcap import read_mcap
+
+    config = rig / "monitor.toml"
+    good = read_mcap(night(rig, 5))
+    other, undated = rig / "other.mcap", rig / "undated.mcap"
+    imported = {**good.metadata, "producer": "imu-square import"}  # as import writes it
+    write_mcap(replace(good, machine_id="mill-4", metadata=imported), other)
+    write_mcap(replace(good, time_ns=good.time_ns - good.time_ns[0] + 1_234_500_000_000), undated)
+    with open_history(rig / "history.db") as h:
+        before = len(h.runs("m1"))
+    for path, why in ((other, "recorded on machine 'mill-4', not this monitor's 'm1'"),
+                      (undated, "its time (1234.500 s since 1970) is no date")):  # fmt: skip
+        assert main(["nightly", "--config", str(config), "--recording", str(path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and why in err[0], err
+        assert main(["replay", "--config", str(config), "--jobs", "1", str(path)]) == 0
+        assert "1 failed" in capsys.readouterr().err
+    with open_history(rig / "history.db") as h:
+        assert len(h.runs("m1")) == before

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from imu_square import __version__
-from imu_square.errors import AnalysisError, ImuSquareError
+from imu_square.errors import AnalysisError, ImuSquareError, RecordingError
+from imu_square.io.times import is_date
 from imu_square.json_values import json_safe
 from imu_square.monitor.alerts.send import queue_alert
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
@@ -182,6 +183,7 @@ def analyse_recording(config, path, program=None, keep_unreadable=True):
             raise
         return None, None, _about_the_run(exc, path), ()
     notes = tuple(_about_the_run(w.message, path) for w in caught)
+    _check_belongs(config, path, recording)
     recorded = recording.program
     if recorded is not None and recorded.n_feeds > 1:
         feeds = ", ".join(f"{v / MM_PER_MIN:g}" for v in recorded.feeds)
@@ -194,22 +196,35 @@ def analyse_recording(config, path, program=None, keep_unreadable=True):
         )
     if program is not None and recording.program is not None and recording.program != program:
         return recording, None, program_mismatch(recording.program, program), notes
-    recorded_on = recording.machine_id
-    if recording.metadata.get("producer") == "imu-square record" and recorded_on not in (
-        "",
-        config.machine_id,
-    ):
-        return (
-            recording,
-            None,
-            f"the recording was made on machine {recorded_on!r}, not {config.machine_id!r}",
-            notes,
-        )
     try:
         result = analyze(recording, config.analysis.options(), program=program)
     except AnalysisError as exc:
         return recording, None, _about_the_run(exc, path), notes
     return recording, result, None, notes
+
+
+# The producers whose recordings name the machine they were made on.
+_NAMES_ITS_MACHINE = ("imu-square record", "imu-square import")
+
+
+def _check_belongs(config, path, recording):
+    """Refuse a recording of another machine, or one whose time is no date: neither has a
+    place in this machine's history (its nights are judged in recording-time order).
+
+    The machine is that of a recording a recorder made or an import named; the
+    simulator's recordings carry their model machine's name there instead."""
+    recorded_on = recording.machine_id
+    made_for = recording.metadata.get("producer") in _NAMES_ITS_MACHINE
+    if made_for and recorded_on not in ("", config.machine_id):
+        raise RecordingError(
+            f"{path}: recorded on machine {recorded_on!r}, not this monitor's "
+            f"{config.machine_id!r}"
+        )
+    if not is_date(recording.time_ns[0]):
+        raise RecordingError(
+            f"{path}: its time ({int(recording.time_ns[0]) / 1e9:.3f} s since 1970) is no date: "
+            f"a logger's clock since power-on; import it again with --start-time"
+        )
 
 
 def _about_the_run(message, path):
