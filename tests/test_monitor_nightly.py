@@ -455,3 +455,44 @@ def test_a_recording_of_another_machine_or_of_no_date_is_refused_and_not_stored(
         assert "1 failed" in capsys.readouterr().err
     with open_history(rig / "history.db") as h:
         assert len(h.runs("m1")) == before
+
+
+@pytest.mark.slow
+def test_a_busy_history_keeps_the_night_says_so_and_stores_it_first_next_time(rig, capsys):
+    # Another process holds the history's write lock longer than the monitor waits:
+    # nightly says it is waiting, keeps the recording for later, names the command
+    # that stores it now, and the alert (sent without the history) says so.
+    config = rig / "monitor.toml"
+    text = config.read_text().replace(
+        'data_dir = "data"', 'data_dir = "data"\nbusy_timeout_s = 3.0'
+    )
+    config.write_text(text)
+    release = rig / "release"
+    child = Path(__file__).with_name("history_child.py")
+    holder = subprocess.Popen(
+        [sys.executable, str(child), "hold", str(rig / "history.db"), "1", str(release)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout.readline() == "holding\n", holder.stderr.read()
+        tonight = night(rig, 5)
+        code = main(["nightly", "--config", str(config), "--recording", str(tonight)])
+        err = capsys.readouterr().err
+    finally:
+        release.touch()
+        holder.communicate(timeout=60)
+    assert code == 2
+    assert "is busy (another process is writing it): waiting up to 1 s more" in err
+    assert f"its recording {tonight} is kept; the next night stores it first, or now: " in err
+    assert f"imu-square nightly --config {config} --recording {tonight}" in err
+    alert = json.loads((rig / "data" / "alert.json").read_text())
+    assert alert["state"] == "invalid" and "could not be stored yet" in alert["verdict"]
+    # the next night stores the kept one first, then itself
+    code, record = judge(config, night(rig, 6), capsys)
+    assert record["state"] in ("ok", "warning")
+    with open_history(rig / "history.db") as h:
+        stored = [Path(r.recording_path).name for r in h.runs("m1")]
+    assert stored[-2:] == ["night-005.mcap", "night-006.mcap"]
+    assert not (rig / "data" / "nights-to-store.txt").exists()

@@ -237,10 +237,9 @@ _SINGLE_RUN_FLAGS = ("port", "program", "machine", "sensor", "seed", "trigger", 
 
 def run_monitor(args, config=None):
     """The monitor's night: record (or take a recording), judge, report, exit with the state."""
-    from imu_square.errors import ImuSquareError
+    from imu_square.errors import HistoryError, ImuSquareError
     from imu_square.monitor.config import read_monitor
-    from imu_square.monitor.history.store import open_history
-    from imu_square.monitor.night import judge_recording
+    from imu_square.monitor.night import judge_recording, store_kept_nights
     from imu_square.monitor.publish import write_night_outputs
     from imu_square.monitor.schedule import EXIT_CODES
 
@@ -266,8 +265,8 @@ def run_monitor(args, config=None):
             file=sys.stderr,
         )
         return 0
-    with open_history(config.history_location()) as history:
-        if args.check:
+    if args.check:
+        with config.open_history() as history:
             print(
                 f"{config.path}: machine {config.machine_id}, history {history.location} "
                 f"({len(history.runs(config.machine_id))} runs), program "
@@ -275,26 +274,32 @@ def run_monitor(args, config=None):
                 f"in {out}: ok",
                 file=sys.stderr,
             )
-            return 0
-        code = 0
-        if args.recording:
-            path = Path(args.recording).resolve()
-        else:
-            stem = out / f"{config.machine_id}-{time.strftime('%Y%m%d-%H%M%S')}"
-            emu = config.emulated
-            path, _, code, _ = _record(
-                stem,
-                program,
-                port=None if config.sensor.emulated else config.sensor.port,
-                emulated=(emu.machine, emu.sensor, None, emu.speed, emu.uptime_s),
-                baud=config.sensor.baud,
-                trigger=config.sensor.trigger,
-                machine_id=config.machine_id,
-                quiet=args.quiet,
-                header_timeout_s=config.sensor.header_timeout_s,
-            )
-        outcome = judge_recording(config, history, path, program, alert=True)
-        files = write_night_outputs(config, history, outcome, out)
+        return 0
+    code = 0
+    if args.recording:
+        path = Path(args.recording).resolve()
+    else:  # recorded first: a history that is busy or down then loses nothing
+        stem = out / f"{config.machine_id}-{time.strftime('%Y%m%d-%H%M%S')}"
+        emu = config.emulated
+        path, _, code, _ = _record(
+            stem,
+            program,
+            port=None if config.sensor.emulated else config.sensor.port,
+            emulated=(emu.machine, emu.sensor, None, emu.speed, emu.uptime_s),
+            baud=config.sensor.baud,
+            trigger=config.sensor.trigger,
+            machine_id=config.machine_id,
+            quiet=args.quiet,
+            header_timeout_s=config.sensor.header_timeout_s,
+        )
+    try:
+        with config.open_history() as history:
+            for late in store_kept_nights(config, history, out, program):
+                print(f"{late.record['recording']}: stored late: {late.verdict}", file=sys.stderr)
+            outcome = judge_recording(config, history, path, program, alert=True)
+            files = write_night_outputs(config, history, outcome, out)
+    except HistoryError as exc:
+        return _kept_for_later(config, args, out, path, exc)
     for name, value in (("trend chart", files.trend_png), ("report", files.report_html)):
         if value is not None:
             print(f"wrote the {name} {value}", file=sys.stderr)
@@ -311,6 +316,37 @@ def run_monitor(args, config=None):
         print(json.dumps(outcome.record))
     # a failed write outranks the verdict: the night must be looked at
     return code if code == 4 else EXIT_CODES[outcome.record["machine_state"]]
+
+
+def _kept_for_later(config, args, out, path, exc):
+    """The history could not take tonight: keep the recording for the next run, say how to
+    store it now, and tell the sinks directly (there is no outbox to keep the alert in)."""
+    from imu_square.cli import EXIT_USER_ERROR
+    from imu_square.monitor.alerts.send import send_without_history
+    from imu_square.monitor.history.encoding import first_line
+    from imu_square.monitor.night import keep_for_later
+
+    keep_for_later(out, path)
+    line = (
+        f"the night could not be stored yet ({first_line(exc)}): its recording {path} is kept; "
+        f"the next night stores it first, or now: imu-square nightly --config {config.path} "
+        f"--recording {path}"
+    )
+    record = {"machine_id": config.machine_id, "state": "invalid", "recording": str(path)}
+    report = send_without_history(
+        config.alerts,
+        {**record, "verdict": line},
+        machine_id=config.machine_id,
+        state="invalid",
+        verdict=line,
+    )
+    for o in report.outcomes:
+        if o.status != "sent":
+            print(f"alert to {o.sink}: {o.status} ({o.error})", file=sys.stderr)
+    print(f"{config.machine_id}: {line}", file=sys.stderr)
+    if args.json:
+        print(json.dumps({**record, "machine_state": "invalid", "verdict": line}))
+    return EXIT_USER_ERROR
 
 
 def _not_made_yet(location):

@@ -28,8 +28,7 @@ def monitor_session(path):
     history : History
     """
     from imu_square.monitor.config import read_monitor
-    from imu_square.monitor.history.store import open_history
 
     config = read_monitor(path)
-    with open_history(config.history_location()) as history:
+    with config.open_history() as history:
         yield config, history

@@ -100,7 +100,6 @@ def run(args):
     from dataclasses import replace
 
     from imu_square.monitor.config import read_monitor
-    from imu_square.monitor.history.store import open_history
     from imu_square.monitor.replay import (
         ReplayJob,
         ReplaySummary,
@@ -134,7 +133,7 @@ def run(args):
 
     summary = ReplaySummary(files=len(paths))
     start = time.monotonic()
-    with open_history(config.history_location()) as history:
+    with config.open_history() as history:
         known = frozenset(
             history.recording_hashes(config.machine_id, settings_hash(analysis_settings(config)))
         )

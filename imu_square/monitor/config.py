@@ -9,6 +9,7 @@ file, as ``imu-square init`` writes it::
     machine_id = "mill-3"
     history = ""                 # "" = the per-user default; a path; or postgresql://...
     data_dir = ""                # recordings, plots, report; "" = beside the history
+    busy_timeout_s = 60.0        # a write waits this long for another process's
 
     [sensor]
     port = "emulated"            # or /dev/serial/by-id/usb-...; "emulated" = built-in board
@@ -220,6 +221,9 @@ class MonitorConfig:
         the per-user default.
     data_dir : Path or None
         Where nightly recordings, plots and the report go; None for beside the history.
+    busy_timeout_s : float
+        How long a write waits for another process's before the night is kept
+        for later. [s]
     sensor : SensorLink
     emulated : EmulatedBoard
     program : Path or None
@@ -234,6 +238,7 @@ class MonitorConfig:
     machine_id: str
     history: str = ""
     data_dir: Path | None = None
+    busy_timeout_s: float = 60.0
     sensor: SensorLink = field(default_factory=SensorLink)
     emulated: EmulatedBoard = field(default_factory=EmulatedBoard)
     program: Path | None = None
@@ -279,6 +284,12 @@ class MonitorConfig:
 
         return self.history or str(default_history_path())
 
+    def open_history(self):
+        """The history, open (:func:`~imu_square.monitor.history.store.open_history`)."""
+        from imu_square.monitor.history.store import open_history
+
+        return open_history(self.history_location(), busy_timeout_s=self.busy_timeout_s)
+
     def output_dir(self):
         """Folder of the nightly recordings, plots and report (created when written)."""
         if self.data_dir is not None:
@@ -318,7 +329,7 @@ def monitor_from_mapping(doc, path):
     def table(name, fields):
         return TomlTable(doc.get(name, {}), f"[{name}]", fields, source, base, MonitorConfigError)
 
-    mon = table("monitor", ("machine_id", "history", "data_dir"))
+    mon = table("monitor", ("machine_id", "history", "data_dir", "busy_timeout_s"))
     machine_id = mon.text("machine_id")
     if (
         not set(machine_id) <= _MACHINE_ID_CHARS
@@ -336,6 +347,7 @@ def monitor_from_mapping(doc, path):
     if history and not history.startswith(("postgresql://", "postgres://")):
         history = str(mon.path("history"))
     data_dir = mon.path("data_dir") if mon.text("data_dir", default="", empty=True) else None
+    busy_timeout_s = mon.number("busy_timeout_s", 0.0, 3600.0, lo_open=True, default=60.0)
 
     sen = table("sensor", ("port", "baud", "trigger", "header_timeout_s"))
     sensor = SensorLink(
@@ -370,6 +382,7 @@ def monitor_from_mapping(doc, path):
         machine_id=machine_id,
         history=history,
         data_dir=data_dir,
+        busy_timeout_s=busy_timeout_s,
         sensor=sensor,
         emulated=emulated,
         program=program,

@@ -238,11 +238,10 @@ def prepare_demo(folder, progress=None, now=None):
     -------
     MonitorConfig
     """
-    from imu_square.monitor.history.store import open_history
 
     folder = Path(folder)
     config = read_monitor(write_demo_files(folder))
-    with open_history(config.history_location()) as history:
+    with config.open_history() as history:
         if not history.runs(config.machine_id):
             shutil.rmtree(config.output_dir() / "seed", ignore_errors=True)
             seed_history(config, history, now=now, progress=progress)

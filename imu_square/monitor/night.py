@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from imu_square import __version__
-from imu_square.errors import AnalysisError, ImuSquareError, RecordingError
+from imu_square.errors import AnalysisError, HistoryError, ImuSquareError, RecordingError
 from imu_square.io.times import is_date
 from imu_square.json_values import json_safe
+from imu_square.log import logger
 from imu_square.monitor.alerts.send import queue_alert
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS, EvaluationRow, RunRow
@@ -58,6 +59,10 @@ class NightOutcome:
     assessment: object
     result: object = None
     alert: object = None
+
+
+#: The data folder's list of recordings a busy or unreachable history could not take.
+KEPT_NIGHTS = "nights-to-store.txt"
 
 
 def analysis_settings(config):
@@ -217,8 +222,7 @@ def _check_belongs(config, path, recording):
     made_for = recording.metadata.get("producer") in _NAMES_ITS_MACHINE
     if made_for and recorded_on not in ("", config.machine_id):
         raise RecordingError(
-            f"{path}: recorded on machine {recorded_on!r}, not this monitor's "
-            f"{config.machine_id!r}"
+            f"{path}: recorded on machine {recorded_on!r}, not this monitor's {config.machine_id!r}"
         )
     if not is_date(recording.time_ns[0]):
         raise RecordingError(
@@ -384,6 +388,65 @@ def judge_recording(config, history, path, program=None, alert=False):
                 verdict=line,
             )
     return NightOutcome(run_id, inserted, night.state, line, record, assessment, result, sent)
+
+
+def keep_for_later(out, path):
+    """Note a night's recording that the history could not take, for the next run.
+
+    Parameters
+    ----------
+    out : Path
+        The monitor's data folder.
+    path : Path
+        The recording, kept on disk.
+    """
+    with open(Path(out) / KEPT_NIGHTS, "a", encoding="utf-8") as kept:
+        kept.write(f"{Path(path).resolve()}\n")
+
+
+def store_kept_nights(config, history, out, program=None):
+    """Store, oldest first, the nights an earlier run kept for later; forget them once stored.
+
+    A kept recording that is gone or refused is logged and forgotten; a
+    history error stops the round and keeps the rest for the next run.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The monitor file.
+    history : History
+        The open history.
+    out : Path
+        The monitor's data folder.
+    program : TestProgram, optional
+        The program the monitor expects.
+
+    Returns
+    -------
+    list of NightOutcome
+        The nights stored now, their alerts pending in the outbox.
+    """
+    listed = Path(out) / KEPT_NIGHTS
+    if not listed.exists():
+        return []
+    waiting = [p for p in dict.fromkeys(listed.read_text(encoding="utf-8").split("\n")) if p]
+    stored = []
+    try:
+        while waiting:
+            path = Path(waiting[0])
+            try:
+                stored.append(judge_recording(config, history, path, program, alert=True))
+            except HistoryError:
+                raise
+            except (OSError, ImuSquareError) as exc:
+                logger.warning("kept night %s is not stored: %s", path, first_line(exc))
+            waiting.pop(0)
+    finally:
+        if waiting:
+            listed.write_text("".join(f"{p}\n" for p in waiting), encoding="utf-8")
+        else:
+            listed.unlink()
+    return stored
 
 
 def store_verdict(history, baseline_row, night, **notes):

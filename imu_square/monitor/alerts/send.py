@@ -216,6 +216,38 @@ def deliver_alerts(config, history, machine_id, alert=None, *, include_rejected=
     return AlertReport(alert, tuple(outcomes), tuple(b for b in backlog if b is not None))
 
 
+def send_without_history(config, record, *, machine_id, state, verdict):
+    """Send an alert straight to the sinks that take its state: the history cannot keep it.
+
+    For a night the history could not take (busy, unreachable): there is no
+    outbox to keep the alert in, so each sink gets its tries now, once.
+
+    Parameters
+    ----------
+    config : AlertsConfig
+        The ``[alerts]`` section.
+    record : dict
+        What the alert says (JSON values).
+    machine_id, state, verdict : str
+        As for :func:`queue_alert`.
+
+    Returns
+    -------
+    AlertReport
+    """
+    alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict)
+    outcomes = []
+    for sink in (s for s in config.sinks if state in s.states):
+        if sink.kind == "log":
+            sink.deliver(alert)
+            result = ("sent", 1, None)
+        else:
+            deadline = time.monotonic() + config.retry.max_total_s
+            result = _try(sink, alert, config.retry, deadline, config.retry.attempts)
+        outcomes.append(SinkOutcome(sink.name, alert.alert_id, state, *result))
+    return AlertReport(alert, tuple(outcomes), ())
+
+
 class _Rounds:
     """One call's delivery rounds: its claim token and clock, the outbox's history."""
 

@@ -22,10 +22,15 @@ from pathlib import Path
 
 from imu_square.errors import HistoryError
 from imu_square.io.atomic import fsync_dir
+from imu_square.log import logger
 from imu_square.monitor.history.encoding import first_line
 
 #: RETURNING needs SQLite 3.35.
 MIN_SQLITE = (3, 35, 0)
+
+
+# A writer waits this long for another process's transaction before it says it is waiting. [s]
+_QUIET_WAIT_S = 2.0
 
 
 class SqliteBackend:
@@ -136,7 +141,10 @@ class SqliteBackend:
 
         Any exception in the body rolls it back and propagates.
         """
-        self.execute("BEGIN IMMEDIATE" if write else "BEGIN")
+        if write:
+            self._begin_writing()
+        else:
+            self.execute("BEGIN")
         try:
             yield
             self.execute("COMMIT")
@@ -147,6 +155,30 @@ class SqliteBackend:
                 except sqlite3.Error:
                     pass  # the connection is gone or the transaction already ended
             raise
+
+    def _begin_writing(self):
+        """``BEGIN IMMEDIATE``; when another process holds the history, say so, then wait."""
+        quiet_s = min(_QUIET_WAIT_S, self.busy_timeout_s)
+        try:
+            self._busy_timeout(quiet_s)
+            try:
+                self.conn.execute("BEGIN IMMEDIATE")
+                return
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) and "busy" not in str(exc):
+                    raise self._error(exc) from exc
+            logger.warning(
+                "history %s is busy (another process is writing it): waiting up to %g s more",
+                self.location,
+                self.busy_timeout_s - quiet_s,
+            )
+            self._busy_timeout(self.busy_timeout_s - quiet_s)
+            self.execute("BEGIN IMMEDIATE")
+        finally:
+            self._busy_timeout(self.busy_timeout_s)
+
+    def _busy_timeout(self, seconds):
+        self.conn.execute(f"PRAGMA busy_timeout = {round(seconds * 1000)}")
 
     @contextmanager
     def savepoint(self):
