@@ -10,7 +10,9 @@ whose ``func`` default takes the parsed arguments and returns an exit code.
 importing them, so that listing the commands costs no command's imports (a
 plugin's module without a literal ``HELP`` is imported and registered instead).
 
-Human-readable text goes to stderr; machine-readable results go to stdout.
+A command's result goes to stdout: a table or a verdict for a person, or JSON
+with ``--json`` (the person's text then on stderr); progress, warnings and
+errors go to stderr, whether or not a terminal is attached.
 A user's mistake is one line on stderr and a non-zero exit, never a traceback.
 
 Exit codes shared by every command: 0 done; 2 a user's mistake (bad option,

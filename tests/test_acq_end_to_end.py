@@ -188,7 +188,7 @@ def test_kill_9_loses_at_most_the_last_second(tmp_path, capsys):
     fixed = tmp_path / "fixed.mcap"
     capsys.readouterr()
     assert main(["recover", str(out), "-o", str(fixed)]) == 0
-    said = capsys.readouterr().err
+    said = capsys.readouterr().out  # recover's result
     assert re.search(r"recovered \d+ samples .* cut at byte \d+", said), said
     rec = read_mcap(fixed)
     assert_exact(rec, board)

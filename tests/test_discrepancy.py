@@ -288,6 +288,7 @@ def test_a_csv_from_an_independent_generator_runs_through_import(tmp_path, capsy
     mcap = tmp_path / "lag.mcap"
     argv = ["import", str(csv), "--program", str(program), "-o", str(mcap)]
     assert main([*argv, "--start-time", "2026-09-01T02:30:00Z"]) == 0
+    capsys.readouterr()
     code, out, _ = run_cli(capsys, mcap, "--json")
     assert code == 1
     doc = json.loads(out)

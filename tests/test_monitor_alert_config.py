@@ -134,9 +134,19 @@ def test_default_states_alert_on_everything_but_ok_and_no_baseline():
             "[[alerts.webhook]]\ntimeout_s = 1",
             r"\[\[alerts.webhook\]\] #1 needs exactly one of url and url_env",
         ),
-        ("[[alerts.webhook]]\nurl = 'ftp://x/y'", r"url must be an http:// or https:// URL"),
-        ("[[alerts.webhook]]\nurl = 'http://x/a b'", r"url must be .*spaces or control characters"),
-        ("[[alerts.webhook]]\nurl = 'http://x:99999/'", r"url must be .*not a valid URL"),
+        # each says once what is wrong (it used to read "must be an http(s) URL (must be ...)")
+        (
+            "[[alerts.webhook]]\nurl = 'ftp://x/y'",
+            r"url must be an http:// or https:// URL with a host, got 'ftp://x/y'$",
+        ),
+        (
+            "[[alerts.webhook]]\nurl = 'http://x/a b'",
+            r"url must not hold spaces or control characters \(percent-encode them\), got",
+        ),
+        (
+            "[[alerts.webhook]]\nurl = 'http://x:99999/'",
+            r"url is not a valid URL: Port out of range 0-65535, got 'http://x:99999/'$",
+        ),
         (HOOK + "timeout_s = 0", r"timeout_s must be in \(0, 120\], got 0"),
         (
             HOOK + "headers = {'X-A' = \"a\\r\\nX-B: b\"}",

@@ -452,7 +452,7 @@ def test_a_recording_of_another_machine_or_of_no_date_is_refused_and_not_stored(
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and why in err[0], err
         assert main(["replay", "--config", str(config), "--jobs", "1", str(path)]) == 0
-        assert "1 failed" in capsys.readouterr().err
+        assert "1 failed" in capsys.readouterr().out
     with open_history(rig / "history.db") as h:
         assert len(h.runs("m1")) == before
 

@@ -11,6 +11,8 @@ import json
 import re
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 from monitor_rig import ALPHA, judge, make_base, night
@@ -231,3 +233,25 @@ def test_baseline_show_and_anchor_by_diagonals(machine, tmp_path, capsys):
     assert "more than 0.1 % off (check the units: mm)" in capsys.readouterr().err
     assert main(bad) == 2
     assert "--diagonals needs --travel-mm" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_results_go_to_stdout_and_the_format_does_not_follow_the_terminal(machine, tmp_path):
+    # `imu-square history > h.txt` used to give an empty file: the table went to stderr.
+    # And replay wrote JSON lines to stdout whenever stderr was not a terminal (cron).
+    script = Path(sys.executable).with_name("imu-square")
+    config = str(machine / "monitor.toml")
+
+    def run(*argv):
+        return subprocess.run(
+            [str(script), *argv], capture_output=True, text=True, timeout=300, check=False
+        )
+
+    table = run("history", "--config", config)
+    assert table.returncode == 0 and table.stdout.splitlines()[0].split()[:2] == ["run", "recorded"]
+    assert "invalid" in table.stdout
+    shown = run("baseline", "show", "--config", config)
+    assert shown.returncode == 0 and shown.stdout.startswith("baseline ")
+    replayed = run("replay", "--config", config, "--jobs", "1", str(machine / "night-003.mcap"))
+    assert replayed.returncode == 0 and replayed.stdout.startswith("replayed 1 recording(s)")
+    assert "{" not in replayed.stdout  # no JSON without --json, terminal or not

@@ -271,9 +271,9 @@ def test_cli_writes_nc_and_prints_timing(tmp_path, capsys):
     out = tmp_path / "warmup.nc"
     argv = ["program", str(toml), "--dialect", "sinumerik", "-o", str(out), "--marker-mcode", "77"]
     assert main(argv) == 0
-    err = capsys.readouterr().err
-    assert "period 6.283 s" in err and "4 blocks of 100.53 s" in err
-    assert f"wrote {out}" in err
+    said = capsys.readouterr()
+    assert "period 6.283 s" in said.out and "4 blocks of 100.53 s" in said.out  # the result
+    assert f"wrote {out}" in said.err
     trace = parse_nc(out.read_text(), "sinumerik")
     check_path(TestProgram(runs=2), trace, marker_mcode=77)
 
@@ -283,8 +283,8 @@ def test_cli_bad_marker_is_one_line_error(tmp_path, capsys):
     toml.write_text(TestProgram().to_toml())
     argv = ["program", str(toml), "-o", str(tmp_path / "w.nc"), "--marker-mcode", "5"]
     assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "linuxcnc must be a user M-code in 100-199, got 5" in err[1]
+    err = capsys.readouterr().err.strip().splitlines()  # the timing went to stdout
+    assert len(err) == 1 and "linuxcnc must be a user M-code in 100-199, got 5" in err[0]
     assert not (tmp_path / "w.nc").exists()
 
 

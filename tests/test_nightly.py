@@ -19,7 +19,18 @@ def test_nightly_on_the_emulated_board_recovers_the_truth(tmp_path, capsys):
     program.write_text(PROGRAM)
     out = tmp_path / "out"
     code = main(
-        ["nightly", "--program", str(program), "--speed", "20", "--seed", "3", "--out", str(out)]
+        [
+            "nightly",
+            "--program",
+            str(program),
+            "--speed",
+            "20",
+            "--seed",
+            "3",
+            "--out",
+            str(out),
+            "--json",
+        ]
     )
     captured = capsys.readouterr()
     assert code == 0, captured.err
@@ -49,7 +60,18 @@ def test_nightly_with_two_feeds_separates_gravity(tmp_path, capsys):
     program.write_text(TWO_FEEDS)
     out = tmp_path / "out"
     code = main(
-        ["nightly", "--program", str(program), "--speed", "10", "--seed", "4", "--out", str(out)]
+        [
+            "nightly",
+            "--program",
+            str(program),
+            "--speed",
+            "10",
+            "--seed",
+            "4",
+            "--out",
+            str(out),
+            "--json",
+        ]
     )
     captured = capsys.readouterr()
     assert code == 0, captured.err

@@ -192,6 +192,7 @@ def test_cli_writes_a_program_the_other_commands_take(tmp_path, capsys):
     assert doc["feeds_mm_per_min"] == [program.feed_m_per_s / MM_PER_MIN]
     assert "plan: r = " in captured.err and f"wrote {out}" in captured.err
     assert main(["program", str(out), "-o", str(tmp_path / "w.ngc")]) == 0
+    capsys.readouterr()
     # the flags name their units; the old name of the noise flag is taken too
     argv[1] = "--noise-density-ug"
     assert main(argv[:-2]) == 0

@@ -211,8 +211,8 @@ def test_cli_prints_timing(tmp_path, capsys):
     path = tmp_path / "p.toml"
     path.write_text(default_program().to_toml())
     assert main(["program", str(path)]) == 0
-    err = capsys.readouterr().err
-    assert "r=100 mm, v=6000 mm/min, period 6.283 s, 2 blocks of 100.53 s, 203.1 s" in err
+    out = capsys.readouterr().out  # the timing is the command's result
+    assert "r=100 mm, v=6000 mm/min, period 6.283 s, 2 blocks of 100.53 s, 203.1 s" in out
 
 
 def test_cli_bad_program_is_one_line(tmp_path, capsys):

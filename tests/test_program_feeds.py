@@ -148,7 +148,7 @@ def test_program_command_prints_each_feed(tmp_path, capsys):
     path = tmp_path / "p.toml"
     path.write_text(program_from_mapping(TWO).to_toml())
     assert main(["program", str(path), "-o", str(tmp_path / "w.ngc")]) == 0
-    err = capsys.readouterr().err
+    err = capsys.readouterr().out  # the timing is the command's result
     assert "r=50 mm, 2 feeds" in err
     assert "6000 mm/min: period 3.142 s, 2 blocks of 21.99 s" in err
     assert "3000 mm/min: period 6.283 s, 2 blocks of 25.13 s" in err

@@ -437,7 +437,7 @@ def test_cli_reference_machine_3(tmp_path, capsys):
     assert all(v == pytest.approx(15e-6, rel=1e-9) for v in out["+"].values())
     assert "diagonal     15.000" in captured.err
     assert main(["reference", "--machine", str(path), "--method", "T"]) == 0
-    err = capsys.readouterr().err
+    err = capsys.readouterr().out  # the table is the result: on stdout without --json
     assert "90deg    65.000" in err and "ballbar" not in err and "µm/m" in err
 
 

@@ -55,7 +55,7 @@ def test_simulate_writes_recording_and_truth(tmp_path, capsys):
         "gravity_coupling,sample_clock_error",
     ]
     assert main(argv) == 0
-    err = capsys.readouterr().err
+    err = capsys.readouterr().out
     assert "samples" in err and "truth squareness 15.00 µm/m" in err
     truth = json.loads((tmp_path / "out" / "run.truth.json").read_text())
     # gravity coupling adds ~980 urad to what theta_y - theta_x will show
@@ -94,7 +94,7 @@ def test_simulate_defaults_and_no_events(tmp_path, capsys):
     truth = json.loads(truth_path.read_text())
     assert truth["squareness_rad"] == 0.0 and isinstance(truth["seed"], int)
     assert truth["expected_squareness_rad"] == 0.0
-    assert "truth squareness 0.00 µm/m; truth in" in capsys.readouterr().err
+    assert "truth squareness 0.00 µm/m; truth in" in capsys.readouterr().out
     assert len(truth["blocks"]) == 2
 
 

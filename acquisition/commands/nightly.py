@@ -20,6 +20,8 @@ import threading
 import time
 from pathlib import Path
 
+from imu_square.commands._output import result_stream
+
 HELP = "record and analyse one nightly run (emulated sensor unless --port is given)"
 
 
@@ -60,6 +62,12 @@ def register(sub):
         help="output folder (default: imu-square-out; with --config the "
         "monitor file's data folder)",
     )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="the result as JSON on stdout (with --config the night's record: state, "
+        "change_urad, ...)",
+    )
     monitor = p.add_argument_group(
         "the monitor",
         "exit codes with --config or --demo: 0 ok, 10 warning, 11 alarm, 12 invalid run, "
@@ -69,9 +77,6 @@ def register(sub):
     monitor.add_argument("--config", metavar="MONITOR.toml", help="the machine's monitor file")
     monitor.add_argument(
         "--recording", metavar="RUN.mcap", help="judge this recording instead of recording one"
-    )
-    monitor.add_argument(
-        "--json", action="store_true", help="the night's record (state, change_urad, ...) on stdout"
     )
     monitor.add_argument(
         "--check", action="store_true", help="check the monitor file and the history, then stop"
@@ -153,7 +158,7 @@ def run(args):
         return run_demo(args)
     if args.config:
         return run_monitor(args)
-    for flag in ("recording", "json", "check"):
+    for flag in ("recording", "check"):
         if getattr(args, flag):
             from imu_square.errors import ImuSquareError
 
@@ -218,17 +223,19 @@ def run_single(args):
     stem.with_suffix(".result.json").write_text(json.dumps(doc, indent=1) + "\n")
     plot_results(results, stem.with_suffix(".png"), title=mcap_path.name)
 
-    print(f"{mcap_path}: {result.summary()}", file=sys.stderr)
+    shown = result_stream(args)
+    print(f"{mcap_path}: {result.summary()}", file=shown)
     if truth is not None:
         u = result.u_squareness_rad
         print(
             f"  truth (simulator): {expected / URAD:.1f} {SQUARENESS_UNIT}; error "
             f"{error / URAD:+.1f} {SQUARENESS_UNIT} = {error / u:+.1f} u"
             + ("" if math.isfinite(u) and abs(error) <= 3 * u else "  <-- outside 3u"),
-            file=sys.stderr,
+            file=shown,
         )
     print(f"wrote {stem}.result.json and {stem}.png", file=sys.stderr)
-    print(json.dumps(doc))
+    if args.json:
+        print(json.dumps(doc))
     return code
 
 
@@ -295,7 +302,10 @@ def run_monitor(args, config=None):
     try:
         with config.open_history() as history:
             for late in store_kept_nights(config, history, out, program):
-                print(f"{late.record['recording']}: stored late: {late.verdict}", file=sys.stderr)
+                print(
+                    f"{late.record['recording']}: stored late: {late.verdict}",
+                    file=result_stream(args),
+                )
             outcome = judge_recording(config, history, path, program, alert=True)
             files = write_night_outputs(config, history, outcome, out)
     except HistoryError as exc:
@@ -311,7 +321,7 @@ def run_monitor(args, config=None):
         print(
             f"{path}: already in the history (run {outcome.run_id}), judged again", file=sys.stderr
         )
-    print(f"{config.machine_id}: {outcome.verdict}", file=sys.stderr)
+    print(f"{config.machine_id}: {outcome.verdict}", file=result_stream(args))
     if args.json:
         print(json.dumps(outcome.record))
     # a failed write outranks the verdict: the night must be looked at
@@ -343,7 +353,7 @@ def _kept_for_later(config, args, out, path, exc):
     for o in report.outcomes:
         if o.status != "sent":
             print(f"alert to {o.sink}: {o.status} ({o.error})", file=sys.stderr)
-    print(f"{config.machine_id}: {line}", file=sys.stderr)
+    print(f"{config.machine_id}: {line}", file=result_stream(args))
     if args.json:
         print(json.dumps({**record, "machine_state": "invalid", "verdict": line}))
     return EXIT_USER_ERROR

@@ -4,6 +4,7 @@ import json
 import sys
 from pathlib import Path
 
+from imu_square.commands._output import result_stream
 from imu_square.errors import ImuSquareError
 
 HELP = "squareness from recorded runs"
@@ -15,8 +16,8 @@ def register(sub):
         "analyze",
         help=HELP,
         description="Filter, segment, flip, average and fit each recording; print the "
-        "squareness (theta_y - theta_x) with its uncertainty. Human summary on stderr; "
-        "--json writes one JSON object per run to stdout.",
+        "squareness (theta_y - theta_x) with its uncertainty: a summary on stdout, or with "
+        "--json one JSON object per run on stdout (the summary then on stderr).",
     )
     p.add_argument("recordings", nargs="+", metavar="RUN.mcap", help="recording(s) to analyse")
     p.add_argument("--json", action="store_true", help="one JSON object per run on stdout")
@@ -97,12 +98,12 @@ def run(args):
         results.append(result)
         last_path = path
         conv = convergence([r.squareness_rad for r in results])
-        print(f"{path}: {result.summary()}", file=sys.stderr)
+        print(f"{path}: {result.summary()}", file=result_stream(args))
         if len(results) > 1:
             print(
                 f"  after {len(results)} runs: mean {conv.mean_rad[-1] / URAD:.1f} ± "
                 f"{conv.u_mean_rad[-1] / URAD:.1f} {SQUARENESS_UNIT} (type A over runs)",
-                file=sys.stderr,
+                file=result_stream(args),
             )
         if args.json:
             doc = {"recording": str(path), **result.to_json_dict()}
@@ -141,9 +142,9 @@ def _run_separated(args, options, program):
     feeds = analyze_feeds(sources, options, program)
     for f in feeds:
         label = f"{f.source} at {f.feed_mm_per_min:g} mm/min"
-        print(f"{label}: {f.result.summary()}", file=sys.stderr)
+        print(f"{label}: {f.result.summary()}", file=result_stream(args))
     separation = separate_gravity(feeds)
-    print(f"{len(feeds)} feeds: {separation.summary()}", file=sys.stderr)
+    print(f"{len(feeds)} feeds: {separation.summary()}", file=result_stream(args))
     if args.json:
         doc = {"recordings": list(args.recordings), **separation.to_json_dict()}
         print(json.dumps(doc), file=sys.stdout, flush=True)

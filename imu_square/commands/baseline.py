@@ -5,6 +5,7 @@ import math
 import sys
 
 from imu_square.commands._monitor import add_config_argument, monitor_session
+from imu_square.commands._output import result_stream
 from imu_square.errors import ImuSquareError
 
 HELP = "set, show or anchor a machine's baseline (its squareness when monitoring began)"
@@ -131,7 +132,7 @@ def run_set(args):
         print("setting the baseline and designing its alarm charts ...", file=sys.stderr)
         row = set_baseline(config, history, runs, note=args.note)
         design = stored_design(history, row, config.alarms)
-        print(_describe(row, design), file=sys.stderr)
+        print(_describe(row, design), file=result_stream(args))
         if args.json:
             print(json.dumps(_json(row, design)))
     return 0
@@ -151,9 +152,11 @@ def run_show(args):
             )
         design = stored_design(history, row, config.alarms)
         anchors = history.anchors(row.id)
-        print(_describe(row, design), file=sys.stderr)
+        print(_describe(row, design), file=result_stream(args))
         for a in anchors:
-            print(f"  anchor by {a.method}: {a.value_rad / URAD:+.2f} µm/m", file=sys.stderr)
+            print(
+                f"  anchor by {a.method}: {a.value_rad / URAD:+.2f} µm/m", file=result_stream(args)
+            )
         if args.json:
             print(json.dumps(_json(row, design, anchors)))
     return 0
@@ -182,6 +185,6 @@ def run_anchor(args):
             f"baseline {row.id} anchored by {anchor.method}: machine squareness "
             f"{anchor.value_rad / URAD:+.2f} µm/m at the baseline; every night now also reports "
             f"it plus the change",
-            file=sys.stderr,
+            file=result_stream(args),
         )
     return 0

@@ -4,6 +4,7 @@ import json
 import re
 import sys
 
+from imu_square.commands._output import result_stream
 from imu_square.errors import ImuSquareError
 from imu_square.reference import REFERENCE_LINES
 from imu_square.units import MM
@@ -22,7 +23,7 @@ def register(sub):
         "on the ballbar's circles through the simulator and the pipeline. The IMU row is "
         "theta_y - theta_x minus the simulated sensor's non-orthogonality beta: the machine's "
         "squareness as the IMU infers it. Each row says where and why it departs from the "
-        "machine's squareness. Table on stderr in µm/m; --json on stdout.",
+        "machine's squareness. A table in µm/m on stdout, or --json (the table then on stderr).",
     )
     p.add_argument("--machine", required=True, help="machine TOML file (as for simulate)")
     p.add_argument(
@@ -118,7 +119,7 @@ def run(args):
         local=args.local,
         imu=not args.no_imu,
     )
-    print(comparison.to_text(), file=sys.stderr)
+    print(comparison.to_text(), file=result_stream(args))
     if args.json:
         doc = {"machine": args.machine, **comparison.to_json_dict()}
         json.dump(doc, sys.stdout, indent=2)

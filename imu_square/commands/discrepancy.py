@@ -3,6 +3,8 @@
 import json
 import sys
 
+from imu_square.commands._output import result_stream
+
 HELP = "fit the simulator to a recording, name the missing effects, show the gap shrink"
 
 
@@ -83,8 +85,8 @@ def run(args):
         result = find_discrepancy(recording, options, program=program)
     except AnalysisError as exc:  # the pipeline names no file: say which
         raise ImuSquareError(f"{args.recording}: {exc}") from None
-    print(f"{args.recording}:", file=sys.stderr)
-    print(result.summary(), file=sys.stderr)
+    print(f"{args.recording}:", file=result_stream(args))
+    print(result.summary(), file=result_stream(args))
     if args.model_out:
         header = (
             f"Fitted by imu-square discrepancy to {args.recording}\n"

@@ -7,6 +7,7 @@ from dataclasses import replace
 from datetime import UTC, datetime
 
 from imu_square.commands._monitor import add_config_argument, monitor_session
+from imu_square.commands._output import result_stream
 from imu_square.errors import ImuSquareError
 
 HELP = "a machine's runs and verdicts, its trend chart, or a back-up of the history"
@@ -83,7 +84,7 @@ def run(args):
         print(
             f"{'run':>5}  {'recorded':20}  {'state':14}  {'change µm/m':>16}  {'θy−θx µm/m':>11}  "
             f"{'eps_c °':>8}  note",
-            file=sys.stderr,
+            file=result_stream(args),
         )
         for n in nights:
             r = n.run
@@ -95,7 +96,7 @@ def run(args):
             print(
                 f"{r.id:>5}  {iso(r.recorded_at_ns):20}  {n.state:14}  {change:>16}  {sq:>11}  "
                 f"{eps:>8}  {n.reason}",
-                file=sys.stderr,
+                file=result_stream(args),
             )
             if args.json:
                 print(json.dumps(night_record(assessment, n, verdict(assessment, n))))
@@ -130,7 +131,7 @@ def _compare(args):
     print(
         f"{'recorded':20}  {'A θy−θx':>9}  {'B θy−θx':>9}  {'B − A':>7}  {'A state':14}  "
         f"{'B state':14}  (µm/m)",
-        file=sys.stderr,
+        file=result_stream(args),
     )
     diffs = []
     for key in both:
@@ -142,7 +143,7 @@ def _compare(args):
         print(
             f"{iso(ra.recorded_at_ns):20}  {_cell(va, 9)}  {_cell(vb, 9)}  {_cell(vb - va, 7)}  "
             f"{sa:14}  {sb:14}",
-            file=sys.stderr,
+            file=result_stream(args),
         )
         if args.json:
             print(
@@ -171,7 +172,7 @@ def _compare(args):
     if d.size:
         sd = f", sd {np.std(d, ddof=1):.2f}" if d.size > 1 else ""
         text += f"; B − A: mean {np.mean(d):+.2f}{sd}, largest {np.max(np.abs(d)):.2f} µm/m"
-    print(text, file=sys.stderr)
+    print(text, file=result_stream(args))
     return 0
 
 

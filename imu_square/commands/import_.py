@@ -142,6 +142,6 @@ def run(args):
         f"imported {recording.n_samples} samples ({recording.duration_s:.3f} s at "
         f"{recording.sample_rate_hz:.6g} Hz, {recording.gap_count} gaps, "
         f"{recording.lost_samples} lost) from {args.csv} to {args.output}",
-        file=sys.stderr,
+        file=sys.stdout,
     )
     return 0

@@ -6,6 +6,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from imu_square.commands._output import result_stream
+
 HELP = "plan a circle test: radius, feed(s), cycles and dwell for a sensor and a machine"
 # Nights simulated to check the monitor's design for a plan: the step's run lengths
 # (2000 machines) do not depend on it, the false-alarm check's precision does (5 %).
@@ -181,7 +183,7 @@ def run(args):
         raise _in_flag_units(exc, args) from None
     if plan.program.n_feeds == 1:
         plan = replace(plan, monitor=_monitor_detection(plan, alarms))
-    print(plan.summary(), file=sys.stderr)
+    print(plan.summary(), file=result_stream(args))
     if args.output:
         out = Path(args.output)
         try:

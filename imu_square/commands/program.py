@@ -45,13 +45,13 @@ def run(args):
             f"{args.program}: r={prog.radius_m * 1e3:g} mm, v={prog.feed_m_per_s * 6e4:g} mm/min, "
             f"period {prog.period_s:.3f} s, {prog.n_blocks} blocks of "
             f"{prog.block_duration_s:.2f} s, {prog.duration_s:.1f} s",
-            file=sys.stderr,
+            file=sys.stdout,
         )
     else:
         print(
             f"{args.program}: r={prog.radius_m * 1e3:g} mm, {prog.n_feeds} feeds, "
             f"{prog.n_blocks} blocks, {prog.duration_s:.1f} s",
-            file=sys.stderr,
+            file=sys.stdout,
         )
         for f in range(prog.n_feeds):
             sub = prog.at_feed(f)
@@ -59,7 +59,7 @@ def run(args):
                 f"  {sub.feed_m_per_s * 6e4:g} mm/min: period {sub.period_s:.3f} s, "
                 f"{sub.n_blocks} blocks of {sub.block_duration_s:.2f} s, "
                 f"v^2/r {sub.centripetal_m_s2:.3g} m/s^2",
-                file=sys.stderr,
+                file=sys.stdout,
             )
     if args.output is None:
         return 0

@@ -45,6 +45,6 @@ def run(args):
     print(
         f"recovered {r.samples} samples ({r.duration_s:.3f} s) and {r.events} events; "
         f"{state}; wrote {args.output}",
-        file=sys.stderr,
+        file=sys.stdout,
     )
     return 0

@@ -8,6 +8,7 @@ release, for scripts written against it.
 import json
 import sys
 
+from imu_square.commands._output import result_stream
 from imu_square.errors import ConfigError
 from imu_square.reference import (
     ORIENTATIONS_DEG,
@@ -101,7 +102,7 @@ def run(args):
                 text += f"   (r = {radius_m / MM:g} mm, centre of travel)"
         else:
             text = "  ".join(f"{k:>6} {v / URAD:9.3f}" for k, v in r.items())
-        print(f"{method:>8}  {text}  {SQUARENESS_UNIT}", file=sys.stderr)
+        print(f"{method:>8}  {text}  {SQUARENESS_UNIT}", file=result_stream(args))
     if args.json:
         doc = {"machine": args.machine, "reference_line": args.reference_line, "methods": results}
         json.dump(doc, sys.stdout, indent=2)

@@ -5,6 +5,7 @@ import sys
 import time
 
 from imu_square.commands._monitor import add_config_argument
+from imu_square.commands._output import result_stream
 from imu_square.errors import ImuSquareError
 
 HELP = "replay recorded runs into a machine's history (local processes or Dask)"
@@ -59,8 +60,8 @@ class _Progress:
 
     def __init__(self, total, as_json):
         self.total, self.done, self.start = total, 0, time.monotonic()
-        self.bar = not as_json and sys.stderr.isatty()
-        self.json = as_json or not sys.stderr.isatty()
+        self.bar = not as_json and sys.stderr.isatty()  # progress, on stderr
+        self.json = as_json
 
     def update(self, outcome):
         self.done += 1
@@ -158,7 +159,7 @@ def run(args):
         _rebaseline(read_monitor(args.config), config, history)
         _judge_all(config, history, summary)
     summary.seconds = time.monotonic() - start
-    _print_summary(summary, config)
+    _print_summary(summary, config, result_stream(args))
     if args.json:
         print(json.dumps({"event": "summary", **summary.to_json_dict()}))
     return 0
@@ -231,17 +232,17 @@ def _judge_all(config, history, summary):
     summary.state = assessment.latest.state if assessment.latest else "no_baseline"
 
 
-def _print_summary(summary, config):
+def _print_summary(summary, config, out):
     c = summary.counts
     print(
         f"replayed {summary.files} recording(s) of {config.machine_id} in {summary.seconds:.1f} s: "
         f"{c['analysed']} analysed, {c['skipped']} skipped (already stored), {c['invalid']} "
         f"invalid, {c['failed']} failed",
-        file=sys.stderr,
+        file=out,
     )
     for path, reason in summary.invalid + summary.failed:
-        print(f"  {path}: {reason}", file=sys.stderr)
+        print(f"  {path}: {reason}", file=out)
     if summary.alarm_nights:
-        print(f"the alarms would have fired on: {', '.join(summary.alarm_nights)}", file=sys.stderr)
+        print(f"the alarms would have fired on: {', '.join(summary.alarm_nights)}", file=out)
     else:
-        print("the alarms would not have fired", file=sys.stderr)
+        print("the alarms would not have fired", file=out)

@@ -90,6 +90,6 @@ def run(args):
     print(
         f"{out}: {recording.n_samples} samples, {recording.duration_s:.1f} s, "
         f"truth squareness {square}; truth in {truth_path}",
-        file=sys.stderr,
+        file=sys.stdout,
     )
     return 0

@@ -342,8 +342,8 @@ def webhook_from_table(table, name, default_states=DEFAULT_ALERT_STATES):
     if table.has("url"):
         try:
             url = check_url(table.text("url"))
-        except ValueError as exc:
-            table.fail("url", f"an http:// or https:// URL ({exc})", table.get("url", None))
+        except ValueError as exc:  # it says what the URL must be, or what is wrong with it
+            table.error(f"url {exc}, got {table.get('url', None)!r}")
     headers = table.get("headers", {})
     if not isinstance(headers, dict):
         table.fail("headers", "a table of header names to string values", headers)
