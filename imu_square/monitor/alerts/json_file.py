@@ -19,7 +19,6 @@ from imu_square.io.atomic import write_atomic
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError
 
 JSON_FILE_MODES = ("latest", "append")
-JSON_FILE_FIELDS = ("name", "states", "path", "mode")
 
 
 @dataclass(frozen=True)
