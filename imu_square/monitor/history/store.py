@@ -142,14 +142,10 @@ def open_history(location=None, *, busy_timeout_s=BUSY_TIMEOUT_S):
 
         backend = SqliteBackend(location, busy_timeout_s)
     try:
-        before = schema.current_version(backend)
-        after = schema.migrate(backend)
+        return History(backend, schema.migrate(backend))
     except BaseException:
         backend.close()
         raise
-    if before != after:
-        logger.info("history %s: schema version %d -> %d", backend.location, before, after)
-    return History(backend, after)
 
 
 def _ns(name, value):
