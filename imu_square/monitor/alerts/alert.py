@@ -23,9 +23,9 @@ import uuid
 from dataclasses import dataclass, field
 
 from imu_square.json_values import json_safe
+from imu_square.monitor.history.rows import EVALUATION_STATES as STATES  # the verdicts'
 from imu_square.validation import check_option
 
-STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
 # A sink's default: everything a person must act on, not the nightly "ok".
 DEFAULT_ALERT_STATES = ("warning", "alarm", "invalid", "stale_baseline")
 ALERT_SCHEMA = "imu-square.alert/1"
