@@ -16,14 +16,16 @@ JSON parser reads the body.
 
 import datetime as dt
 import json
+import os
 import re
+import ssl
 import uuid
 from dataclasses import dataclass, field
 
 from imu_square.json_values import json_safe
+from imu_square.monitor.history.rows import EVALUATION_STATES as STATES  # the verdicts'
 from imu_square.validation import check_option
 
-STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
 # A sink's default: everything a person must act on, not the nightly "ok".
 DEFAULT_ALERT_STATES = ("warning", "alarm", "invalid", "stale_baseline")
 ALERT_SCHEMA = "imu-square.alert/1"
@@ -126,6 +128,56 @@ def make_alert(record, *, machine_id, state, verdict, now=None):
         created_at=now.isoformat(timespec="microseconds"),
         record=json_safe(record, "record"),
     )
+
+
+def env_secret(variable, field):
+    """A secret from the environment, read when an alert is sent (never stored).
+
+    Parameters
+    ----------
+    variable : str
+        The environment variable.
+    field : str
+        The sink's field that names it, for the message.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    DeliveryError
+        Permanent, when the variable is not set or empty.
+    """
+    value = os.environ.get(variable, "")
+    if not value:
+        raise DeliveryError(
+            f"the environment variable {variable} ({field}) is not set", permanent=True
+        )
+    return value
+
+
+def tls_context(ca_file):
+    """A TLS context that verifies the server against the system's CAs or ``ca_file``.
+
+    Parameters
+    ----------
+    ca_file : Path or None
+        A CA bundle to use instead of the system's.
+
+    Returns
+    -------
+    ssl.SSLContext
+
+    Raises
+    ------
+    DeliveryError
+        Permanent, when ``ca_file`` cannot be loaded.
+    """
+    try:
+        return ssl.create_default_context(cafile=ca_file)
+    except (OSError, ssl.SSLError) as exc:
+        raise DeliveryError(f"cannot load ca_file {ca_file}: {exc}", permanent=True) from None
 
 
 class DeliveryError(Exception):

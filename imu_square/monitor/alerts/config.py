@@ -42,21 +42,22 @@ not used.
 
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from imu_square.errors import ImuSquareWarning, MonitorConfigError
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES
-from imu_square.monitor.alerts.json_file import JSON_FILE_FIELDS, json_file_from_table
-from imu_square.monitor.alerts.log_line import LOG_FIELDS, LogSink, log_from_table
-from imu_square.monitor.alerts.mail import EMAIL_FIELDS, email_from_table
-from imu_square.monitor.alerts.webhook import WEBHOOK_FIELDS, webhook_from_table
+from imu_square.monitor.alerts.json_file import JsonFileSink, json_file_from_table
+from imu_square.monitor.alerts.log_line import LogSink, log_from_table
+from imu_square.monitor.alerts.mail import EmailSink, email_from_table
+from imu_square.monitor.alerts.webhook import WebhookSink, webhook_from_table
 from imu_square.validation import TomlTable, tables
 
 ALERTS_FIELDS = ("states", "attempts", "backoff_s", "max_total_s", "outbox")
+# Each kind's sink and its builder; a sink's table has the sink's fields.
 SINK_KINDS = {
-    "json_file": (JSON_FILE_FIELDS, json_file_from_table),
-    "webhook": (WEBHOOK_FIELDS, webhook_from_table),
-    "email": (EMAIL_FIELDS, email_from_table),
+    "json_file": (JsonFileSink, json_file_from_table),
+    "webhook": (WebhookSink, webhook_from_table),
+    "email": (EmailSink, email_from_table),
 }
 _SINK_NAME = re.compile(r"[A-Za-z0-9_.-]{1,64}")
 
@@ -139,14 +140,14 @@ def alerts_from_mapping(table, source="<monitor file>", base_dir=None):
     )
     log = LogSink()
     if top.has("log"):
-        log = log_from_table(checked(table["log"], "[alerts.log]", LOG_FIELDS))
+        log = log_from_table(checked(table["log"], "[alerts.log]", ("states",)))
     sinks = [log]
-    for kind, (fields, build) in SINK_KINDS.items():
+    for kind, (sink, build) in SINK_KINDS.items():
         if not top.has(kind):
             continue
         labelled = tables(table[kind], f"alerts.{kind}", source, MonitorConfigError)
         for i, (raw, where) in enumerate(labelled, start=1):
-            t = checked(raw, where, fields)
+            t = checked(raw, where, [f.name for f in fields(sink)])
             name = t.text("name", default=kind if len(labelled) == 1 else f"{kind}-{i}")
             if not _SINK_NAME.fullmatch(name) or name == "log":
                 t.fail("name", "1-64 letters, digits, '_', '.' or '-', and not 'log'", name)

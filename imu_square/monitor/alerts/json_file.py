@@ -19,7 +19,6 @@ from imu_square.io.atomic import write_atomic
 from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError
 
 JSON_FILE_MODES = ("latest", "append")
-JSON_FILE_FIELDS = ("name", "states", "path", "mode")
 
 
 @dataclass(frozen=True)
@@ -88,9 +87,7 @@ class JsonFileSink:
         try:
             on_disk = json.loads(self.path.read_bytes())
             return on_disk["created_at"] > alert.created_at  # ISO 8601 UTC sorts as text
-        except FileNotFoundError:
-            return False
-        except (ValueError, KeyError, TypeError):  # not one of ours: replace it
+        except (FileNotFoundError, ValueError, KeyError, TypeError):  # none, or not one of ours
             return False
 
     def describe(self):

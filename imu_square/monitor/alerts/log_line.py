@@ -22,8 +22,6 @@ _LEVELS = {
     "alarm": logging.ERROR,
 }
 
-LOG_FIELDS = ("states",)
-
 
 @dataclass(frozen=True)
 class LogSink:

@@ -33,7 +33,6 @@ others, the alert counts as sent and the refused ones are logged.
 """
 
 import json
-import os
 import smtplib
 import socket
 import ssl
@@ -44,25 +43,18 @@ from email.utils import format_datetime
 from pathlib import Path
 
 from imu_square.log import logger
-from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError, one_line
+from imu_square.monitor.alerts.alert import (
+    DEFAULT_ALERT_STATES,
+    STATES,
+    DeliveryError,
+    env_secret,
+    one_line,
+    tls_context,
+)
 from imu_square.monitor.alerts.webhook import is_loopback
 
 SECURITY = ("starttls", "ssl", "none")
 DEFAULT_PORTS = {"starttls": 587, "ssl": 465, "none": 25}
-EMAIL_FIELDS = (
-    "name",
-    "states",
-    "host",
-    "port",
-    "security",
-    "sender",
-    "to",
-    "username",
-    "password_env",
-    "password_file",
-    "timeout_s",
-    "ca_file",
-)
 MAX_TIMEOUT_S = 120.0
 _POLICY = policy.default.clone(max_line_length=998)
 ADDRESS = "an e-mail address such as 'maint@example.com' or 'Maintenance <maint@example.com>'"
@@ -132,10 +124,7 @@ class EmailSink:
         message = build_message(alert, self.sender, self.to)
         password = self._password() if self.username is not None else None
         timeout_s = timeout_s or self.timeout_s
-        try:
-            context = ssl.create_default_context(cafile=self.ca_file)
-        except (OSError, ssl.SSLError) as exc:
-            raise DeliveryError(f"cannot load ca_file {self.ca_file}: {exc}", True) from None
+        context = tls_context(self.ca_file)
         # gethostname, not smtplib's default getfqdn: a DNS lookup that can stall for seconds.
         helo = socket.gethostname() or "localhost"
         try:
@@ -179,10 +168,8 @@ class EmailSink:
 
     def _password(self):
         if self.password_env is not None:
-            password = os.environ.get(self.password_env, "")
+            password = env_secret(self.password_env, "password_env")
             where = f"the environment variable {self.password_env} (password_env)"
-            if not password:
-                raise DeliveryError(f"{where} is not set", permanent=True)
         else:
             where = f"password_file {self.password_file}"
             try:

@@ -31,7 +31,6 @@ system's trusted CAs or, with ``ca_file``, against that bundle only.
 
 import http.client
 import ipaddress
-import os
 import re
 import ssl
 import urllib.error
@@ -41,21 +40,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from imu_square import __version__
-from imu_square.monitor.alerts.alert import DEFAULT_ALERT_STATES, STATES, DeliveryError
+from imu_square.monitor.alerts.alert import (
+    DEFAULT_ALERT_STATES,
+    STATES,
+    DeliveryError,
+    env_secret,
+    tls_context,
+)
 from imu_square.validation import has_control_chars
 
-WEBHOOK_FIELDS = (
-    "name",
-    "states",
-    "url",
-    "url_env",
-    "timeout_s",
-    "headers",
-    "token_env",
-    "token_header",
-    "token_prefix",
-    "ca_file",
-)
 MAX_TIMEOUT_S = 120.0
 TRANSIENT_4XX = (408, 425, 429)
 # Headers the client itself sets from the body and the URL.
@@ -135,11 +128,7 @@ class WebhookSink:
         )
         handlers = [_RefuseRedirect()]
         if url.lower().startswith("https:"):
-            try:
-                context = ssl.create_default_context(cafile=self.ca_file)
-            except (OSError, ssl.SSLError) as exc:
-                raise DeliveryError(f"cannot load ca_file {self.ca_file}: {exc}", True) from None
-            handlers.append(urllib.request.HTTPSHandler(context=context))
+            handlers.append(urllib.request.HTTPSHandler(context=tls_context(self.ca_file)))
         opener = urllib.request.build_opener(*handlers)
         try:
             with opener.open(request, timeout=timeout_s or self.timeout_s) as reply:
@@ -159,13 +148,8 @@ class WebhookSink:
     def _url(self):
         if self.url is not None:
             return self.url
-        url = os.environ.get(self.url_env, "")
-        if not url:
-            raise DeliveryError(
-                f"the environment variable {self.url_env} (url_env) is not set", permanent=True
-            )
         try:
-            url = check_url(url)
+            url = check_url(env_secret(self.url_env, "url_env"))
         except ValueError as exc:
             raise DeliveryError(f"${self.url_env} {exc}", permanent=True) from None
         if self.token_env is not None and _clear_to_network(url):
@@ -180,12 +164,7 @@ class WebhookSink:
         }
         headers.update(self.headers)
         if self.token_env is not None:
-            token = os.environ.get(self.token_env, "")
-            if not token:
-                raise DeliveryError(
-                    f"the environment variable {self.token_env} (token_env) is not set",
-                    permanent=True,
-                )
+            token = env_secret(self.token_env, "token_env")
             if not is_header_text(token):
                 # A CR/LF in a header value would let the variable inject headers.
                 raise DeliveryError(

@@ -60,7 +60,7 @@ class Outbox:
         """
         p = self._params()
         where = f"machine_id = {p(machine_id)} AND state = {p(state)}"
-        return [OUTBOX.read(r) for r in self._select(OUTBOX, where, p, "created_at_ns, id")]
+        return self._select(OUTBOX, where, p, "created_at_ns, id")
 
     def claim_alert(self, row_id, claim, until_ns, at_ns=None):
         """Take a pending alert until ``until_ns``, unless a claim holds it at ``at_ns``.

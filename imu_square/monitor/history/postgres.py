@@ -26,10 +26,9 @@ import os
 import re
 import shutil
 import subprocess
-from contextlib import contextmanager
-from pathlib import Path
 
 from imu_square.errors import HistoryError
+from imu_square.monitor.history.backend import Backend
 from imu_square.monitor.history.encoding import first_line
 
 
@@ -39,7 +38,7 @@ def redact(url):
     return re.sub(r"(password=)[^&\s]*", r"\1***", url)
 
 
-class PostgresBackend:
+class PostgresBackend(Backend):
     """One connection to a history on a PostgreSQL server.
 
     Parameters
@@ -52,6 +51,8 @@ class PostgresBackend:
     """
 
     name = "postgresql"
+    # a reader sees one snapshot
+    BEGIN_READ = "BEGIN ISOLATION LEVEL REPEATABLE READ, READ ONLY"
 
     def __init__(self, url, busy_timeout_s):
         self.url = url
@@ -66,6 +67,7 @@ class PostgresBackend:
                 "pip install 'imu-square[postgres]'"
             ) from None
         self._psycopg = psycopg
+        self.errors = (psycopg.Error,)
         try:
             params = conninfo.conninfo_to_dict(url)
         except psycopg.Error as exc:
@@ -97,58 +99,16 @@ class PostgresBackend:
 
     def _error(self, exc):
         """One line naming the history, for any psycopg error."""
-        errors = self._psycopg.errors
-        if isinstance(exc, errors.LockNotAvailable):
+        if isinstance(exc, self._psycopg.errors.LockNotAvailable):
             why = f"another process held a lock for more than {self.busy_timeout_s:g} s"
         else:
             why = first_line(exc)
         return HistoryError(f"history {self.location}: {why}")
 
-    def _run(self, sql, params):
-        try:
-            return self.conn.execute(sql, params)
-        except self._psycopg.Error as exc:
-            raise self._error(exc) from exc
-
     @staticmethod
     def mark(i):
         """The marker of the ``i``-th parameter (from 1) in a statement: ``$i``."""
         return f"${i}"
-
-    def execute(self, sql, params=()):
-        """Run one statement; return the number of rows it changed."""
-        return self._run(sql, params).rowcount
-
-    def query(self, sql, params=()):
-        """Run one statement; return all its rows as tuples."""
-        cur = self._run(sql, params)
-        try:
-            return cur.fetchall()
-        except self._psycopg.Error as exc:
-            raise self._error(exc) from exc
-
-    @contextmanager
-    def transaction(self, write):
-        """One transaction; a read-only one sees one snapshot.
-
-        Any exception in the body rolls it back and propagates.
-        """
-        try:
-            with self.conn.transaction():
-                if not write:
-                    self._run("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ, READ ONLY", ())
-                yield
-        except self._psycopg.Error as exc:  # from COMMIT itself
-            raise self._error(exc) from exc
-
-    @contextmanager
-    def savepoint(self):
-        """A savepoint inside the open transaction: undone alone if the body fails."""
-        try:
-            with self.conn.transaction():  # nested: psycopg makes it a savepoint
-                yield
-        except self._psycopg.Error as exc:
-            raise self._error(exc) from exc
 
     def lock_schema(self):
         """Serialise schema changes of this schema across processes, until the commit."""
@@ -175,24 +135,10 @@ class PostgresBackend:
     def check(self):
         """Nothing to check from the client: the server keeps its own files consistent."""
 
-    def backup(self, path):
-        """Dump the history's schema with ``pg_dump --format=custom`` into ``path``.
-
-        Parameters
-        ----------
-        path : str or Path
-            The dump file; replaced if it exists (written beside it, then renamed).
-
-        Returns
-        -------
-        Path
-            ``path``.
-        """
+    def _dump(self, dest, tmp):
+        """Dump the history's schema with ``pg_dump --format=custom`` into ``tmp``."""
         from psycopg import conninfo
 
-        dest = Path(path).expanduser()
-        if dest.is_dir():
-            raise HistoryError(f"history backup {dest}: is a folder, not a file")
         pg_dump = find_pg_tool("pg_dump")
         if pg_dump is None:
             raise HistoryError(
@@ -205,7 +151,6 @@ class PostgresBackend:
         if password is not None:
             env["PGPASSWORD"] = str(password)
         schema = '"' + self.schema.replace('"', '""') + '"'
-        tmp = dest.with_name(f".{dest.name}.{os.getpid()}.partial")
         cmd = [
             pg_dump,
             "--format=custom",
@@ -213,25 +158,12 @@ class PostgresBackend:
             f"--file={tmp}",
             f"--dbname={conninfo.make_conninfo('', **params)}",
         ]
-        try:
-            done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
-            if done.returncode != 0:
-                raise HistoryError(
-                    f"history {self.location}: backup to {dest} failed: pg_dump: "
-                    f"{first_line(done.stderr or f'exit status {done.returncode}')}"
-                )
-            os.replace(tmp, dest)
-        except OSError as exc:
+        done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
             raise HistoryError(
-                f"history {self.location}: backup to {dest} failed: {first_line(exc)}"
-            ) from exc
-        finally:
-            tmp.unlink(missing_ok=True)
-        return dest
-
-    def close(self):
-        """Close the connection."""
-        self.conn.close()
+                f"history {self.location}: backup to {dest} failed: pg_dump: "
+                f"{first_line(done.stderr or f'exit status {done.returncode}')}"
+            )
 
 
 def find_pg_tool(name):

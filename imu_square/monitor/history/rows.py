@@ -20,7 +20,8 @@ A field ``id`` or ``created_at_ns`` left None is filled in by the store.
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
+from functools import partial
 
 from imu_square import __version__
 from imu_square.errors import HistoryError
@@ -46,127 +47,137 @@ OUTBOX_STATES = ("pending", "delivered", "rejected")
 _SHA256 = re.compile(r"[0-9a-f]{64}")
 
 
-# --- field checks: each names the row and field, what is allowed and what came ---
+# --- field checks: each takes "Row.field" and the value, and returns it normalised or raises
+# naming the row and field, what is allowed and what came ---
 
 
-def _set(row, name, value):
-    object.__setattr__(row, name, value)
-
-
-def _where(row, name):
-    return f"{type(row).__name__}.{name}"
-
-
-def _storable(row, name, value):
+def _storable(where, value):
     """Text both backends store as it is: UTF-8 (no lone surrogates from undecodable
     file names) and no NUL, which PostgreSQL's text refuses."""
     if not isinstance(value, str):
-        raise HistoryError(f"{_where(row, name)} must be text, got {value!r}")
+        raise HistoryError(f"{where} must be text, got {value!r}")
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:
-        raise HistoryError(f"{_where(row, name)} must be UTF-8 text, got {value!r}") from None
+        raise HistoryError(f"{where} must be UTF-8 text, got {value!r}") from None
     if "\x00" in value:
-        raise HistoryError(f"{_where(row, name)} must not hold a NUL character, got {value!r}")
+        raise HistoryError(f"{where} must not hold a NUL character, got {value!r}")
     return value
 
 
-def _text(row, name):
-    value = getattr(row, name)
+def _text(where, value):
     if isinstance(value, os.PathLike):
         value = os.fspath(value)
     # a file name is stored as it was given: a tab is allowed, a line break is not
-    check_text(_where(row, name), value, controls=True, error=HistoryError)
-    _set(row, name, _storable(row, name, value))
+    check_text(where, value, controls=True, error=HistoryError)
+    return _storable(where, value)
 
 
-def _one_line(row, name):
+def _one_line(where, value):
     """Whitespace runs (newlines too) collapse to one space: a reason is one line."""
-    value = getattr(row, name)
     if value is None:
-        return
-    value = _storable(row, name, value)
-    _set(row, name, " ".join(value.split()) or None)
+        return None
+    return " ".join(_storable(where, value).split()) or None
 
 
-def _float(row, name, *, required=False):
-    value = getattr(row, name)
-    if is_number(value) and math.isnan(value):  # NaN is NULL
-        value = None
-    if value is not None:
-        # -0.0 is 0.0 (SQLite keeps an integral REAL as an integer)
-        value = check_number(_where(row, name), value, -math.inf, math.inf, error=HistoryError)
-        value += 0.0
-    elif required:
-        fail(_where(row, name), "a number", getattr(row, name), error=HistoryError)
-    _set(row, name, value)
+def _float(where, value, required=False):
+    if value is None or (is_number(value) and math.isnan(value)):  # NaN is NULL
+        if required:
+            fail(where, "a number", value, error=HistoryError)
+        return None
+    # -0.0 is 0.0 (SQLite keeps an integral REAL as an integer)
+    return check_number(where, value, -math.inf, math.inf, error=HistoryError) + 0.0
 
 
-def _int(row, name, *, optional=True, minimum=None):
-    value = getattr(row, name)
-    if value is None and optional:
-        return
-    where, bits = _where(row, name), "a 64-bit integer"
+def _int(where, value, required=False, minimum=None):
+    if value is None and not required:
+        return None
     # BIGINT, and nanoseconds up to the year 2262
+    bits = "a 64-bit integer"
     value = check_int(
         where, value, -(2**63), 2**63 - 1, kind="an integer", allowed=bits, error=HistoryError
     )
     if minimum is not None and value < minimum:
         fail(where, f"at least {minimum}", value, error=HistoryError)
-    _set(row, name, value)
+    return value
 
 
-def _bool(row, name):
-    _set(row, name, check_bool(_where(row, name), getattr(row, name), error=HistoryError))
-
-
-def _json(row, name, kind):
+def _json(where, value, kind=dict):
     try:
-        value = json_safe(getattr(row, name), _where(row, name))
+        value = json_safe(value, where)
     except JsonValueError as exc:
         raise HistoryError(
-            f"{_where(row, name)} must hold JSON values (dicts, lists, text, numbers), "
+            f"{where} must hold JSON values (dicts, lists, text, numbers), "
             f"got a {type(exc.value).__name__}: {exc.value!r}"
         ) from None
     if not isinstance(value, kind):
-        raise HistoryError(
-            f"{_where(row, name)} must be a JSON {kind.__name__}, got {type(value).__name__}"
-        )
-    _set(row, name, value)
+        raise HistoryError(f"{where} must be a JSON {kind.__name__}, got {type(value).__name__}")
+    return value
 
 
-def _sha256(row, name, *, optional=False):
-    value = getattr(row, name)
-    if value is None and optional:
-        return
+def _texts(where, value):
+    value = _json(where, value, list)
+    if not all(isinstance(w, str) for w in value):
+        raise HistoryError(f"{where} must be text, got {value!r}")
+    return tuple(value)
+
+
+def _sha256(where, value, required=True):
+    if value is None and not required:
+        return None
     text = value.lower() if isinstance(value, str) else value
     if not isinstance(text, str) or not _SHA256.fullmatch(text):
-        raise HistoryError(f"{_where(row, name)} must be 64 hexadecimal digits, got {value!r}")
-    _set(row, name, text)
+        raise HistoryError(f"{where} must be 64 hexadecimal digits, got {value!r}")
+    return text
 
 
-#: RunRow's float fields, in the order of the table's columns.
-RUN_FLOAT_FIELDS = (
-    "squareness_rad",
-    "u_squareness_rad",
-    "u_squareness_bootstrap_rad",
-    "dof",
-    "crb_rad",
-    "theta_x_rad",
-    "theta_y_rad",
-    "eps_c_rad",
-    "u_eps_c_rad",
-    "servo_mismatch_rad",
-    "u_servo_mismatch_rad",
-    "noise_density_m_s2_rthz",
-    "amp_x_m_s2",
-    "amp_y_m_s2",
-    "temperature_start_c",
-    "temperature_end_c",
-    "temperature_mean_c",
-    "time_since_power_on_s",
-)
-_VALID_NEEDS = ("squareness_rad", "u_squareness_rad")
+def _run_ids(where, ids):
+    if isinstance(ids, str | bytes) or not hasattr(ids, "__iter__"):
+        raise HistoryError(f"{where} must be run ids, got {ids!r}")
+    what = "one or more run ids"
+    ids = tuple(check_int(where, i, kind=what, error=HistoryError) for i in ids)
+    if not ids:
+        fail(where, what, ids, error=HistoryError)
+    if len(set(ids)) != len(ids):
+        raise HistoryError(f"{where} must not repeat a run, got {ids!r}")
+    return tuple(sorted(ids))
+
+
+def _option(*allowed):
+    return lambda where, value: check_option(where, value, allowed, error=HistoryError)
+
+
+# The check of a field by its annotation, unless the field names its own (_checked).
+_BY_TYPE = {
+    int | None: _int,
+    int: partial(_int, required=True),
+    float | None: _float,
+    float: partial(_float, required=True),
+    str: _text,
+    str | None: _one_line,
+    bool: lambda where, value: check_bool(where, value, error=HistoryError),
+    dict: _json,
+    tuple: _texts,
+}
+
+
+def _checked(check=None, default=MISSING, **kw):
+    """A field checked by ``check`` (default: by its annotation) with the options ``kw``.
+
+    ``required_if="valid"`` makes the field required when the row's ``valid`` is true.
+    """
+    return field(default=default, metadata={"check": check, **kw})
+
+
+def _check_fields(row):
+    """Check and normalise every field of ``row`` in field order (see :data:`_BY_TYPE`)."""
+    for f in fields(row):
+        kw = dict(f.metadata)
+        check = kw.pop("check", None) or _BY_TYPE[f.type]
+        if "required_if" in kw:
+            kw["required"] = bool(getattr(row, kw.pop("required_if")))
+        value = check(f"{type(row).__name__}.{f.name}", getattr(row, f.name), **kw)
+        object.__setattr__(row, f.name, value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -234,19 +245,20 @@ class RunRow:
         The whole ``RunResult.to_json_dict()``.
     """
 
-    id: int | None = None
+    id: int | None = _checked(default=None, minimum=1)
     machine_id: str
     recording_path: str
-    recording_sha256: str
+    recording_sha256: str = _checked(_sha256)
     settings: dict
-    settings_hash: str | None = None
+    settings_hash: str | None = _checked(_sha256, default=None, required=False)
     software_version: str = __version__
     recorded_at_ns: int | None
     analysed_at_ns: int | None = None
     valid: bool
     invalid_reason: str | None = None
-    squareness_rad: float | None = None
-    u_squareness_rad: float | None = None
+    # a valid run has a squareness and its uncertainty
+    squareness_rad: float | None = _checked(default=None, required_if="valid")
+    u_squareness_rad: float | None = _checked(default=None, required_if="valid")
     u_squareness_bootstrap_rad: float | None = None
     dof: float | None = None
     crb_rad: float | None = None
@@ -263,39 +275,17 @@ class RunRow:
     temperature_end_c: float | None = None
     temperature_mean_c: float | None = None
     time_since_power_on_s: float | None = None
-    cycles_ccw: int | None = None
-    cycles_cw: int | None = None
+    cycles_ccw: int | None = _checked(default=None, minimum=0)
+    cycles_cw: int | None = _checked(default=None, minimum=0)
     quality: dict = field(default_factory=dict)
     warnings: tuple = ()
     per_cycle: dict = field(default_factory=dict)
     result: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self):
-        _int(self, "id", minimum=1)
-        _text(self, "machine_id")
-        _text(self, "recording_path")
-        _sha256(self, "recording_sha256")
-        _json(self, "settings", dict)
-        _sha256(self, "settings_hash", optional=True)
+        _check_fields(self)
         if self.settings_hash is None:
-            _set(self, "settings_hash", settings_hash(self.settings))
-        _text(self, "software_version")
-        _int(self, "recorded_at_ns")
-        _int(self, "analysed_at_ns")
-        _bool(self, "valid")
-        _one_line(self, "invalid_reason")
-        for name in RUN_FLOAT_FIELDS:
-            # A valid run has a squareness and its uncertainty.
-            _float(self, name, required=self.valid and name in _VALID_NEEDS)
-        _int(self, "cycles_ccw", minimum=0)
-        _int(self, "cycles_cw", minimum=0)
-        _json(self, "quality", dict)
-        _json(self, "warnings", list)
-        if not all(isinstance(w, str) for w in self.warnings):
-            raise HistoryError(f"RunRow.warnings must be text, got {self.warnings!r}")
-        _set(self, "warnings", tuple(self.warnings))
-        _json(self, "per_cycle", dict)
-        _json(self, "result", dict)
+            object.__setattr__(self, "settings_hash", settings_hash(self.settings))
         if self.valid:
             if self.invalid_reason is not None:
                 raise HistoryError(
@@ -309,6 +299,10 @@ class RunRow:
     def recorded_at(self):
         """When the recording started (aware UTC datetime, or None)."""
         return datetime_from_ns(self.recorded_at_ns)
+
+
+#: RunRow's float fields, in the order of the table's columns.
+RUN_FLOAT_FIELDS = tuple(f.name for f in fields(RunRow) if f.type == float | None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -357,53 +351,27 @@ class BaselineRow:
         designed.
     """
 
-    id: int | None = None
+    id: int | None = _checked(default=None, minimum=1)
     machine_id: str
-    run_ids: tuple
+    run_ids: tuple = _checked(_run_ids)
     squareness_mean_rad: float
     squareness_sd_rad: float | None = None
     u_squareness_mean_rad: float
     eps_c_rad: float | None = None
     u_eps_c_rad: float | None = None
     dof: float | None = None
-    settings_hash: str | None = None
+    settings_hash: str | None = _checked(_sha256, default=None, required=False)
     first_run_at_ns: int | None = None
     last_run_at_ns: int | None = None
     stale: bool = False
     stale_reason: str | None = None
     stale_at_ns: int | None = None
-    note: str = ""
+    note: str = _checked(_storable, default="")
     created_at_ns: int | None = None
     alarm_design: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        _int(self, "id", minimum=1)
-        _text(self, "machine_id")
-        ids = self.run_ids
-        if isinstance(ids, str | bytes) or not hasattr(ids, "__iter__"):
-            raise HistoryError(f"BaselineRow.run_ids must be run ids, got {ids!r}")
-        what = "one or more run ids"
-        ids = tuple(check_int("BaselineRow.run_ids", i, kind=what, error=HistoryError) for i in ids)
-        if not ids:
-            fail("BaselineRow.run_ids", what, ids, error=HistoryError)
-        if len(set(ids)) != len(ids):
-            raise HistoryError(f"BaselineRow.run_ids must not repeat a run, got {ids!r}")
-        _set(self, "run_ids", tuple(sorted(ids)))
-        _float(self, "squareness_mean_rad", required=True)
-        _float(self, "squareness_sd_rad")
-        _float(self, "u_squareness_mean_rad", required=True)
-        _float(self, "eps_c_rad")
-        _float(self, "u_eps_c_rad")
-        _float(self, "dof")
-        _sha256(self, "settings_hash", optional=True)
-        _int(self, "first_run_at_ns")
-        _int(self, "last_run_at_ns")
-        _bool(self, "stale")
-        _one_line(self, "stale_reason")
-        _int(self, "stale_at_ns")
-        _storable(self, "note", self.note)
-        _int(self, "created_at_ns")
-        _json(self, "alarm_design", dict)
+        _check_fields(self)
         if self.stale and self.stale_reason is None:
             raise HistoryError("BaselineRow.stale_reason must say why a stale baseline is stale")
 
@@ -437,24 +405,17 @@ class AnchorRow:
         When it was stored; stamped by the store when None. [ns]
     """
 
-    id: int | None = None
-    baseline_id: int
-    method: str
+    id: int | None = _checked(default=None, minimum=1)
+    baseline_id: int = _checked(minimum=1)
+    method: str = _checked(_option(*ANCHOR_METHODS))
     value_rad: float
     u_value_rad: float | None = None
     input: dict = field(default_factory=dict)
-    note: str = ""
+    note: str = _checked(_storable, default="")
     created_at_ns: int | None = None
 
     def __post_init__(self):
-        _int(self, "id", minimum=1)
-        _int(self, "baseline_id", optional=False, minimum=1)
-        check_option("AnchorRow.method", self.method, ANCHOR_METHODS, error=HistoryError)
-        _float(self, "value_rad", required=True)
-        _float(self, "u_value_rad")
-        _json(self, "input", dict)
-        _storable(self, "note", self.note)
-        _int(self, "created_at_ns")
+        _check_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -481,20 +442,17 @@ class EvaluationRow:
         When the verdict was stored; stamped by the store when None. [ns]
     """
 
-    id: int | None = None
-    run_id: int
-    baseline_id: int | None = None
-    state: str
+    id: int | None = _checked(default=None, minimum=1)
+    run_id: int = _checked(minimum=1)
+    baseline_id: int | None = _checked(default=None, minimum=1)
+    state: str = _checked(_option(*EVALUATION_STATES))
     change_rad: float | None = None
     u_change_rad: float | None = None
     statistics: dict = field(default_factory=dict)
     created_at_ns: int | None = None
 
     def __post_init__(self):
-        _int(self, "id", minimum=1)
-        _int(self, "run_id", optional=False, minimum=1)
-        _int(self, "baseline_id", minimum=1)
-        check_option("EvaluationRow.state", self.state, EVALUATION_STATES, error=HistoryError)
+        _check_fields(self)
         if self.baseline_id is None and self.state not in ("no_baseline", "invalid"):
             raise HistoryError(
                 f"EvaluationRow.baseline_id must name the baseline of a {self.state!r} verdict"
@@ -504,10 +462,6 @@ class EvaluationRow:
                 f"EvaluationRow.baseline_id must be None for 'no_baseline', got "
                 f"{self.baseline_id!r}"
             )
-        _float(self, "change_rad")
-        _float(self, "u_change_rad")
-        _json(self, "statistics", dict)
-        _int(self, "created_at_ns")
 
 
 @dataclass(frozen=True, kw_only=True)

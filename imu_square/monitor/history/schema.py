@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 from imu_square import __version__
 from imu_square.errors import HistoryError
+from imu_square.log import logger
 from imu_square.monitor.history.encoding import first_line, now_ns
 from imu_square.monitor.history.sql import Params
 
@@ -257,10 +258,9 @@ def migrate(backend, target=None):
     Returns
     -------
     int
-        The schema version now.
+        The schema version now; a change is logged.
     """
-    migrations = MIGRATIONS
-    latest = migrations[-1].version
+    latest = latest_version()
     target = latest if target is None else target
     version = current_version(backend)
     _refuse_newer(backend, version, latest)
@@ -271,7 +271,7 @@ def migrate(backend, target=None):
         version = current_version(backend)  # again: another process may have migrated it
         _refuse_newer(backend, version, latest)
         start = version
-        for m in migrations:
+        for m in MIGRATIONS:
             if not version < m.version <= target:
                 continue
             try:
@@ -292,6 +292,8 @@ def migrate(backend, target=None):
                     f"{first_line(cause)}"
                 ) from cause
             version = m.version
+    if version != start:  # else another process migrated it while this one waited
+        logger.info("history %s: schema version %d -> %d", backend.location, start, version)
     return version
 
 

@@ -12,28 +12,25 @@
 - Back-ups through SQLite's backup API, which reads the committed pages of
   the file *and* its ``-wal`` (a copy of the ``.db`` alone loses what the WAL
   holds), into a temporary file beside the target, checked, then renamed.
+- The last connection to close checkpoints the WAL into the file.
 """
 
-import os
 import sqlite3
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 from imu_square.errors import HistoryError
-from imu_square.io.atomic import fsync_dir
 from imu_square.log import logger
+from imu_square.monitor.history.backend import Backend
 from imu_square.monitor.history.encoding import first_line
 
+# A writer waits this long for another process's transaction before it says it is waiting. [s]
+_QUIET_WAIT_S = 2.0
 #: RETURNING needs SQLite 3.35.
 MIN_SQLITE = (3, 35, 0)
 
 
-# A writer waits this long for another process's transaction before it says it is waiting. [s]
-_QUIET_WAIT_S = 2.0
-
-
-class SqliteBackend:
+class SqliteBackend(Backend):
     """One connection to a history file.
 
     Parameters
@@ -45,6 +42,9 @@ class SqliteBackend:
     """
 
     name = "sqlite"
+    # a writer takes the one write lock at once, a reader gets one consistent snapshot
+    BEGIN_WRITE = "BEGIN IMMEDIATE"
+    errors = (sqlite3.Error,)
 
     def __init__(self, path, busy_timeout_s):
         self.path = Path(path).expanduser()
@@ -116,54 +116,16 @@ class SqliteBackend:
             why = text
         return HistoryError(f"history {self.location}: {why}")
 
-    @staticmethod
-    def mark(i):
-        """The marker of the ``i``-th parameter (from 1) in a statement: sqlite3's ``?``."""
-        return "?"
-
-    def execute(self, sql, params=()):
-        """Run one statement; return the number of rows it changed."""
-        try:
-            return self.conn.execute(sql, params).rowcount
-        except sqlite3.Error as exc:
-            raise self._error(exc) from exc
-
-    def query(self, sql, params=()):
-        """Run one statement; return all its rows as tuples."""
-        try:
-            return self.conn.execute(sql, params).fetchall()
-        except sqlite3.Error as exc:
-            raise self._error(exc) from exc
-
-    @contextmanager
-    def transaction(self, write):
-        """One transaction: ``BEGIN IMMEDIATE`` (write) or ``BEGIN`` (read), then COMMIT.
-
-        Any exception in the body rolls it back and propagates.
-        """
-        if write:
-            self._begin_writing()
-        else:
-            self.execute("BEGIN")
-        try:
-            yield
-            self.execute("COMMIT")
-        except BaseException:
-            if self.conn.in_transaction:
-                try:
-                    self.conn.execute("ROLLBACK")
-                except sqlite3.Error:
-                    pass  # the connection is gone or the transaction already ended
-            raise
-
-    def _begin_writing(self):
-        """``BEGIN IMMEDIATE``; when another process holds the history, say so, then wait."""
+    def _begin(self, write):
+        """``BEGIN``, or ``BEGIN IMMEDIATE`` that says so when another process holds the
+        history longer than a moment, and then waits the rest of the busy timeout."""
+        if not write:
+            return self.execute(self.BEGIN_READ)
         quiet_s = min(_QUIET_WAIT_S, self.busy_timeout_s)
         try:
             self._busy_timeout(quiet_s)
             try:
-                self.conn.execute("BEGIN IMMEDIATE")
-                return
+                return self.conn.execute(self.BEGIN_WRITE)
             except sqlite3.OperationalError as exc:
                 if "locked" not in str(exc) and "busy" not in str(exc):
                     raise self._error(exc) from exc
@@ -173,27 +135,17 @@ class SqliteBackend:
                 self.busy_timeout_s - quiet_s,
             )
             self._busy_timeout(self.busy_timeout_s - quiet_s)
-            self.execute("BEGIN IMMEDIATE")
+            return self.execute(self.BEGIN_WRITE)
         finally:
             self._busy_timeout(self.busy_timeout_s)
 
     def _busy_timeout(self, seconds):
         self.conn.execute(f"PRAGMA busy_timeout = {round(seconds * 1000)}")
 
-    @contextmanager
-    def savepoint(self):
-        """A savepoint inside the open transaction: undone alone if the body fails."""
-        self.execute("SAVEPOINT imu_square_write")
-        try:
-            yield
-        except BaseException:
-            try:
-                self.conn.execute("ROLLBACK TO imu_square_write")
-                self.conn.execute("RELEASE imu_square_write")
-            except sqlite3.Error:
-                pass  # the whole transaction is gone: the caller's rollback reports it
-            raise
-        self.execute("RELEASE imu_square_write")
+    @staticmethod
+    def mark(i):
+        """The marker of the ``i``-th parameter (from 1) in a statement: sqlite3's ``?``."""
+        return "?"
 
     def lock_schema(self):
         """Nothing to do: ``BEGIN IMMEDIATE`` already holds the one write lock."""
@@ -220,50 +172,20 @@ class SqliteBackend:
                 f"{first_line(problems[0])}{more}); restore it from a backup"
             )
 
-    def backup(self, path):
-        """Copy the history's committed state into the SQLite file ``path``.
+    def _dump(self, dest, tmp):
+        """Copy the committed state through the backup API into the SQLite file ``tmp``.
 
-        The copy is written beside ``path``, checked with ``quick_check``,
-        switched to a rollback journal (one self-contained file) and renamed
-        over ``path``, so ``path`` is never a half-written file.
-
-        Parameters
-        ----------
-        path : str or Path
-            The backup file; replaced if it exists.
-
-        Returns
-        -------
-        Path
-            ``path``.
+        The copy is checked with ``quick_check`` and switched to a rollback
+        journal: one self-contained file.
         """
-        dest = Path(path).expanduser()
-        if dest.is_dir():
-            raise HistoryError(f"history backup {dest}: is a folder, not a file")
         if dest.exists() and dest.resolve() == self.path.resolve():
             raise HistoryError(f"history backup {dest}: is the history itself")
-        tmp = dest.with_name(f".{dest.name}.{os.getpid()}.partial")
+        target = sqlite3.connect(tmp, isolation_level=None)
         try:
-            target = sqlite3.connect(tmp, isolation_level=None)
-            try:
-                self.conn.backup(target)
-                problems = [r[0] for r in target.execute("PRAGMA quick_check") if r[0] != "ok"]
-                if problems:
-                    raise sqlite3.DatabaseError(f"the copy fails quick_check: {problems[0]}")
-                target.execute("PRAGMA journal_mode = DELETE")
-            finally:
-                target.close()
-            with open(tmp, "rb") as f:
-                os.fsync(f.fileno())
-            os.replace(tmp, dest)
-            fsync_dir(dest.parent)
-        except (sqlite3.Error, OSError) as exc:
-            tmp.unlink(missing_ok=True)
-            raise HistoryError(
-                f"history {self.location}: backup to {dest} failed: {first_line(exc)}"
-            ) from exc
-        return dest
-
-    def close(self):
-        """Close the connection (the last one to close checkpoints the WAL)."""
-        self.conn.close()
+            self.conn.backup(target)
+            problems = [r[0] for r in target.execute("PRAGMA quick_check") if r[0] != "ok"]
+            if problems:
+                raise sqlite3.DatabaseError(f"the copy fails quick_check: {problems[0]}")
+            target.execute("PRAGMA journal_mode = DELETE")
+        finally:
+            target.close()

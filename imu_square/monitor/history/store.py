@@ -128,7 +128,8 @@ def open_history(location=None, *, busy_timeout_s=BUSY_TIMEOUT_S):
     """
     if location is None:
         location = default_history_path()
-    if not isinstance(location, str | os.PathLike) or not str(location).strip():
+    usable = isinstance(location, str | os.PathLike) and str(location).strip()
+    if not usable or (_URL.match(str(location)) and not is_postgres_url(location)):
         raise HistoryError(
             f"history location must be a file path or a postgresql:// URL, got {location!r}"
         )
@@ -136,23 +137,15 @@ def open_history(location=None, *, busy_timeout_s=BUSY_TIMEOUT_S):
         from imu_square.monitor.history.postgres import PostgresBackend
 
         backend = PostgresBackend(str(location), busy_timeout_s)
-    elif _URL.match(str(location)):
-        raise HistoryError(
-            f"history location must be a file path or a postgresql:// URL, got {location!r}"
-        )
     else:
         from imu_square.monitor.history.sqlite import SqliteBackend
 
         backend = SqliteBackend(location, busy_timeout_s)
     try:
-        before = schema.current_version(backend)
-        after = schema.migrate(backend)
+        return History(backend, schema.migrate(backend))
     except BaseException:
         backend.close()
         raise
-    if before != after:
-        logger.info("history %s: schema version %d -> %d", backend.location, before, after)
-    return History(backend, after)
 
 
 def _ns(name, value):
@@ -258,17 +251,25 @@ class History(Outbox):
             p.values,
         )
 
-    def _select(self, table, where, p, order="id", join=""):
-        """The column values of the rows of ``table`` (joined with ``join``) matching ``where``."""
+    def _select(self, table, where, p, order="id", join="", more=lambda values: {}):
+        """The rows of ``table`` (joined with ``join``) matching ``where``, read back.
+
+        ``more(values)`` gives the fields kept in other tables from the row's column values.
+        """
         columns = ", ".join(f"{table.name}.{c}" for c in table.columns)
-        return self._conn.query(
-            f"SELECT {columns} FROM {table.name} {join} WHERE {where} ORDER BY {order}", p.values
-        )
+        sql = f"SELECT {columns} FROM {table.name} {join} WHERE {where} ORDER BY {order}"
+        return [table.read(r, **more(r)) for r in self._conn.query(sql, p.values)]
+
+    def _only(self, rows, what, row_id):
+        """The one row of ``rows``; raise if there is none."""
+        if not rows:
+            raise HistoryError(f"history {self.location}: no {what} {row_id!r}")
+        return rows[0]
 
     def _require(self, table, row_id, what):
         p = self._params()
-        if not self._conn.query(f"SELECT 1 FROM {table} WHERE id = {p(row_id)}", p.values):
-            raise HistoryError(f"history {self.location}: no {what} {row_id!r}")
+        found = self._conn.query(f"SELECT 1 FROM {table} WHERE id = {p(row_id)}", p.values)
+        self._only(found, what, row_id)
 
     # --- runs ---
 
@@ -298,27 +299,17 @@ class History(Outbox):
             if got:
                 logger.debug("history %s: run %d stored", self.location, got[0][0])
                 return got[0][0], True
-            p = self._params()
-            got = self._conn.query(
-                f"SELECT id FROM runs WHERE machine_id = {p(row.machine_id)} AND "
-                f"recording_sha256 = {p(row.recording_sha256)} AND "
-                f"settings_hash = {p(row.settings_hash)}",
-                p.values,
-            )
-        logger.debug("history %s: run %d was already there", self.location, got[0][0])
-        return got[0][0], False
+            run_id = self.run_by_hash(row.machine_id, row.recording_sha256, row.settings_hash).id
+        logger.debug("history %s: run %d was already there", self.location, run_id)
+        return run_id, False
 
     def _select_runs(self, where, p):
-        order = "recorded_at_ns IS NULL, recorded_at_ns, id"
-        return [RUNS.read(r) for r in self._select(RUNS, where, p, order)]
+        return self._select(RUNS, where, p, "recorded_at_ns IS NULL, recorded_at_ns, id")
 
     def run(self, run_id):
         """The run with id ``run_id``; raise if there is none."""
         p = self._params()
-        rows = self._select_runs(f"id = {p(run_id)}", p)
-        if not rows:
-            raise HistoryError(f"history {self.location}: no run {run_id!r}")
-        return rows[0]
+        return self._only(self._select_runs(f"id = {p(run_id)}", p), "run", run_id)
 
     def run_by_hash(self, machine_id, recording_sha256, settings_hash):
         """The run of this recording under these settings, or None.
@@ -425,37 +416,30 @@ class History(Outbox):
             raise HistoryError("BaselineRow.stale must be False for a new baseline")
         with self._write():
             p = self._params()
-            found = {
-                r[0]: r[1:]
-                for r in self._conn.query(
-                    "SELECT id, machine_id, valid, invalid_reason, settings_hash, recorded_at_ns "
-                    f"FROM runs WHERE id IN ({p.list(row.run_ids)})",
-                    p.values,
-                )
-            }
-            missing = [i for i in row.run_ids if i not in found]
+            runs = {r.id: r for r in self._select_runs(f"id IN ({p.list(row.run_ids)})", p)}
+            missing = [i for i in row.run_ids if i not in runs]
             if missing:
                 raise HistoryError(
                     f"BaselineRow.run_ids: history {self.location} has no run {missing!r}"
                 )
-            for run_id, (machine, valid, reason, _, _) in sorted(found.items()):
-                if machine != row.machine_id:
+            for run_id, run in sorted(runs.items()):
+                if run.machine_id != row.machine_id:
                     raise HistoryError(
-                        f"BaselineRow.run_ids: run {run_id} is of machine {machine!r}, "
+                        f"BaselineRow.run_ids: run {run_id} is of machine {run.machine_id!r}, "
                         f"not {row.machine_id!r}"
                     )
-                if not valid:
+                if not run.valid:
                     raise HistoryError(
-                        f"BaselineRow.run_ids: run {run_id} is invalid ({reason}); "
+                        f"BaselineRow.run_ids: run {run_id} is invalid ({run.invalid_reason}); "
                         "an invalid run never enters a baseline"
                     )
-            hashes = sorted({v[3] for v in found.values()})
+            hashes = sorted({r.settings_hash for r in runs.values()})
             if len(hashes) > 1:
                 raise HistoryError(
                     f"BaselineRow.run_ids: the runs were analysed with {len(hashes)} different "
                     "settings; a baseline's runs must share one"
                 )
-            times = [v[4] for v in found.values() if v[4] is not None]
+            times = [r.recorded_at_ns for r in runs.values() if r.recorded_at_ns is not None]
             derived = {
                 "settings_hash": hashes[0],
                 "first_run_at_ns": min(times) if times else None,
@@ -469,37 +453,27 @@ class History(Outbox):
                     )
             values = BASELINES.values(row, stamp="created_at_ns") | derived
             baseline_id = self._insert(BASELINES, values)[0][0]
-            for run_id in row.run_ids:
-                p = self._params()
-                self._conn.execute(
-                    "INSERT INTO baseline_runs (baseline_id, run_id) "
-                    f"VALUES ({p.list((baseline_id, run_id))})",
-                    p.values,
-                )
+            p = self._params()
+            pairs = ", ".join(f"({p.list((baseline_id, run_id))})" for run_id in row.run_ids)
+            sql = f"INSERT INTO baseline_runs (baseline_id, run_id) VALUES {pairs}"
+            self._conn.execute(sql, p.values)
         logger.debug("history %s: baseline %d stored", self.location, baseline_id)
         return baseline_id
 
     def _select_baselines(self, where, p):
         with self._read():
-            rows = self._select(BASELINES, where, p)
-            return [BASELINES.read(r, run_ids=self._run_ids(r[0])) for r in rows]
+            return self._select(BASELINES, where, p, more=self._run_ids)
 
-    def _run_ids(self, baseline_id):
+    def _run_ids(self, values):
         p = self._params()
-        rows = self._conn.query(
-            f"SELECT run_id FROM baseline_runs WHERE baseline_id = {p(baseline_id)} "
-            "ORDER BY run_id",
-            p.values,
-        )
-        return tuple(r[0] for r in rows)
+        sql = f"SELECT run_id FROM baseline_runs WHERE baseline_id = {p(values[0])} ORDER BY run_id"
+        return {"run_ids": tuple(r[0] for r in self._conn.query(sql, p.values))}
 
     def baseline(self, baseline_id):
         """The baseline with id ``baseline_id``; raise if there is none."""
         p = self._params()
         rows = self._select_baselines(f"id = {p(baseline_id)}", p)
-        if not rows:
-            raise HistoryError(f"history {self.location}: no baseline {baseline_id!r}")
-        return rows[0]
+        return self._only(rows, "baseline", baseline_id)
 
     def baselines(self, machine_id):
         """Every baseline of a machine, oldest first."""
@@ -592,8 +566,7 @@ class History(Outbox):
     def anchors(self, baseline_id):
         """A baseline's anchors, oldest first."""
         p = self._params()
-        rows = self._select(ANCHORS, f"baseline_id = {p(baseline_id)}", p)
-        return [ANCHORS.read(r) for r in rows]
+        return self._select(ANCHORS, f"baseline_id = {p(baseline_id)}", p)
 
     # --- evaluations ---
 
@@ -623,42 +596,30 @@ class History(Outbox):
         )
         updates = ", ".join(f"{c} = excluded.{c}" for c in values)
         with self._write():
-            p = self._params()
-            run = self._conn.query(
-                f"SELECT machine_id, valid FROM runs WHERE id = {p(row.run_id)}", p.values
-            )
-            if not run:
-                raise HistoryError(f"history {self.location}: no run {row.run_id!r}")
-            if not run[0][1] and row.state != "invalid":
+            run = self.run(row.run_id)
+            if not run.valid and row.state != "invalid":
                 raise HistoryError(
                     f"EvaluationRow.state must be 'invalid' for the invalid run {row.run_id}, "
                     f"got {row.state!r}"
                 )
-            if row.baseline_id is not None:
-                p = self._params()
-                base = self._conn.query(
-                    f"SELECT machine_id FROM baselines WHERE id = {p(row.baseline_id)}", p.values
+            base = None if row.baseline_id is None else self.baseline(row.baseline_id)
+            if base is not None and base.machine_id != run.machine_id:
+                raise HistoryError(
+                    f"EvaluationRow: run {row.run_id} is of machine {run.machine_id!r} but "
+                    f"baseline {row.baseline_id} of {base.machine_id!r}"
                 )
-                if not base:
-                    raise HistoryError(f"history {self.location}: no baseline {row.baseline_id!r}")
-                if base[0][0] != run[0][0]:
-                    raise HistoryError(
-                        f"EvaluationRow: run {row.run_id} is of machine {run[0][0]!r} but "
-                        f"baseline {row.baseline_id} of {base[0][0]!r}"
-                    )
             return self._insert(
                 EVALUATIONS, values, f"ON CONFLICT {target} DO UPDATE SET {updates}"
             )[0][0]
 
     def _select_evaluations(self, where, p):
-        rows = self._select(
+        return self._select(
             EVALUATIONS,
             where,
             p,
             "runs.recorded_at_ns IS NULL, runs.recorded_at_ns, runs.id, evaluations.id",
             "JOIN runs ON runs.id = evaluations.run_id",
         )
-        return [EVALUATIONS.read(r) for r in rows]
 
     def evaluations(self, machine_id, since=None, until=None, baseline_id=None):
         """A machine's verdicts in the recording-time order of their runs.

@@ -306,23 +306,15 @@ class AlarmDesign:
     @property
     def limits(self):
         """The alarm limits as :class:`~imu_square.monitor.stats.charts.ChartLimits`."""
-        return ChartLimits(
-            self.shewhart.limit,
-            self.ewma.parameter,
-            self.ewma.limit,
-            self.cusum.parameter,
-            self.cusum.limit,
-        )
+        s, e, c = self.charts
+        return ChartLimits(s.limit, e.parameter, e.limit, c.parameter, c.limit)
 
     @property
     def warnings(self):
         """The warning limits as :class:`~imu_square.monitor.stats.charts.ChartLimits`."""
+        s, e, c = self.charts
         return ChartLimits(
-            self.shewhart.warning_limit,
-            self.ewma.parameter,
-            self.ewma.warning_limit,
-            self.cusum.parameter,
-            self.cusum.warning_limit,
+            s.warning_limit, e.parameter, e.warning_limit, c.parameter, c.warning_limit
         )
 
     @property
@@ -532,8 +524,8 @@ def design_alarms(
         np.random.default_rng(seeds[1]),
     )
     # Then each chart's share scaled by how much the charts overlap in the simulation.
-    overlap = max(1.0, (1.0 / arl0) / _rate(first)[0])
-    warning_overlap = max(1.0, wfrac / _warning(first)[0])
+    overlap = max(1.0, (1.0 / arl0) / _per_night(first)[0])
+    warning_overlap = max(1.0, wfrac / _per_night(first, "warning_nights")[0])
     logger.debug("alarm design: overlap %.3f (alarms), %.3f (warnings)", overlap, warning_overlap)
     alarm = [
         solve_limit(c, arl0 / (overlap * s), law, rho, guess=c.limit)
@@ -548,8 +540,8 @@ def design_alarms(
     counts = alarm_counts(
         limits, warnings, sampler, mc_paths, mc_span, np.random.default_rng(seeds[2])
     )
-    rate, u_rate = _rate(counts)
-    wf, u_wf = _warning(counts)
+    rate, u_rate = _per_night(counts)
+    wf, u_wf = _per_night(counts, "warning_nights")
     episodes = counts["warning_onsets"].sum() / (mc_paths * mc_span)
 
     step_law = law.shifted(delta)
@@ -666,15 +658,9 @@ def _limits(alarm, warning=None):
     return ChartLimits(warning[0], ewma.lam, warning[1], cusum.k, warning[2])
 
 
-def _rate(counts):
-    """Alarms per night and its standard error, from per-path counts."""
-    per_path = counts["alarms"] / counts["n_nights"]
-    return float(per_path.mean()), float(per_path.std(ddof=1) / math.sqrt(per_path.size))
-
-
-def _warning(counts):
-    """Fraction of nights in warning and its standard error, from per-path counts."""
-    per_path = counts["warning_nights"] / counts["n_nights"]
+def _per_night(counts, key="alarms"):
+    """Per-path ``key`` counts (alarms, warning nights) per night: mean and standard error."""
+    per_path = counts[key] / counts["n_nights"]
     return float(per_path.mean()), float(per_path.std(ddof=1) / math.sqrt(per_path.size))
 
 
@@ -734,20 +720,7 @@ class ChartPoint:
 
     def to_json_dict(self):
         """JSON-ready values (the change in µrad = µm/m)."""
-        return {
-            "night": self.night,
-            "change_urad": self.change_rad / URAD,
-            "u_change_urad": self.u_change_rad / URAD,
-            "nu": self.nu,
-            "z": self.z,
-            "ewma": self.ewma,
-            "cusum_pos": self.cusum_pos,
-            "cusum_neg": self.cusum_neg,
-            "alarms": list(self.alarms),
-            "warnings": list(self.warnings),
-            "direction": self.direction,
-            "state": self.state,
-        }
+        return json_safe(self, urad=True)
 
 
 @dataclass(frozen=True)

@@ -280,10 +280,6 @@ class Shewhart:
 
     limit: float
 
-    def with_limit(self, limit):
-        """The same chart with another limit ``limit`` [1]."""
-        return replace(self, limit=float(limit))
-
     def arl(self, law, nodes=None):
         """Average run length (zero-state and steady-state alike). [nights]
 
@@ -335,10 +331,6 @@ class Ewma:
 
     lam: float
     limit: float
-
-    def with_limit(self, limit):
-        """The same chart with another limit ``limit`` [1]."""
-        return replace(self, limit=float(limit))
 
     def default_nodes(self):
         """Gauss–Legendre nodes: a few per kernel width ``lam`` across ``2 h``."""
@@ -433,10 +425,6 @@ class Cusum:
 
     k: float
     limit: float
-
-    def with_limit(self, limit):
-        """The same chart with another limit ``limit`` [1]."""
-        return replace(self, limit=float(limit))
 
     def default_nodes(self):
         """Gauss–Legendre nodes: a few per unit of ``z`` across ``h``."""
@@ -664,10 +652,10 @@ def solve_limit(chart, arl0, law, baseline_sd=0.0, guess=None):
         # P(|z| > L) = 1/arl0 for a centred symmetric law: exact.
         q = 1.0 / (2.0 * arl0)
         limit = stats.norm.isf(q) if law.nu is None else stats.t.isf(q, law.nu)
-        return chart.with_limit(limit)
+        return replace(chart, limit=float(limit))
 
     def excess(limit):
-        c = chart.with_limit(limit)
+        c = replace(chart, limit=float(limit))
         a = c.arl(law) if baseline_sd == 0.0 else baseline_average(c, law, baseline_sd)["rate_arl"]
         return math.log(min(a, _ARL_CAP)) - math.log(arl0)
 
@@ -686,7 +674,7 @@ def solve_limit(chart, arl0, law, baseline_sd=0.0, guess=None):
         lo, hi, f_lo = hi, 2.0 * hi, f_hi
         f_hi = excess(hi)
     limit = optimize.brentq(excess, lo, hi, xtol=1e-10, rtol=1e-8)
-    return chart.with_limit(limit)
+    return replace(chart, limit=float(limit))
 
 
 def solve_warning(chart, fraction, law, baseline_sd=0.0, nodes=_BASELINE_NODES):

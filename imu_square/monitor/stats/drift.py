@@ -27,12 +27,12 @@ References
 """
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from imu_square.errors import AnalysisError
-from imu_square.units import URAD
+from imu_square.json_values import json_safe
 
 # A slope is "significant" below this p-value (two-sided t-test).
 SIGNIFICANCE = 0.05
@@ -46,14 +46,14 @@ class DriftFit:
     ----------
     regressor : str
         ``"temperature_c"`` [degC] or ``"time_since_power_on_s"`` [s].
-    slope_rad_per_unit : float
-        Fitted slope ``b``. [rad per degC or rad per s]
-    u_slope_rad_per_unit : float
-        Its standard error. [rad per unit]
     p_value : float
         Two-sided p-value of ``b = 0``.
     reference : float
         ``x_ref``, the value the result is corrected to. [degC or s]
+    n : int
+        Observations.
+    dof : int
+        Residual degrees of freedom.
     value_at_reference_rad : float
         ``theta_y - theta_x`` at ``x_ref``. [rad]
     u_value_at_reference_rad : float
@@ -63,23 +63,23 @@ class DriftFit:
         pair means within the night. [rad]
     u_uncorrected_rad : float
         Its standard error from the same data. [rad]
-    n : int
-        Observations.
-    dof : int
-        Residual degrees of freedom.
+    slope_rad_per_unit : float
+        Fitted slope ``b``. [rad per degC or rad per s]
+    u_slope_rad_per_unit : float
+        Its standard error. [rad per unit]
     """
 
     regressor: str
-    slope_rad_per_unit: float
-    u_slope_rad_per_unit: float
     p_value: float
     reference: float
+    n: int
+    dof: int
     value_at_reference_rad: float
     u_value_at_reference_rad: float
     uncorrected_rad: float
     u_uncorrected_rad: float
-    n: int
-    dof: int
+    slope_rad_per_unit: float
+    u_slope_rad_per_unit: float
 
     @property
     def significant(self):
@@ -104,19 +104,8 @@ class DriftFit:
         return value_rad - self.slope_rad_per_unit * (np.asarray(x) - self.reference)
 
     def to_json_dict(self):
-        """JSON-ready, angles in µrad."""
-        d = asdict(self)
-        for k in (
-            "value_at_reference_rad",
-            "u_value_at_reference_rad",
-            "uncorrected_rad",
-            "u_uncorrected_rad",
-        ):
-            d[k.replace("_rad", "_urad")] = d.pop(k) / URAD
-        d["slope_urad_per_unit"] = d.pop("slope_rad_per_unit") / URAD
-        d["u_slope_urad_per_unit"] = d.pop("u_slope_rad_per_unit") / URAD
-        d["significant"] = self.significant
-        return d
+        """JSON-ready, angles in µrad, with :attr:`significant`."""
+        return json_safe(self, urad=True) | {"significant": self.significant}
 
 
 def cycle_drift_variable(result, recording):
