@@ -40,7 +40,10 @@ def _set_up_and_run(folder, capsys, init_extra):
     assert main(["baseline", "set", "--config", str(monitor), *runs]) == 0
     assert "warning" not in capsys.readouterr().err
     code, record = _night(monitor, capsys)
-    assert record["state"] == "ok" and code == 0, record
+    # An unchanged machine: ok, or warning on the 2 % of in-control nights the charts are
+    # designed to warn on (the emulated board's noise is not seeded); its change is noise.
+    assert (record["state"], code) in (("ok", 0), ("warning", 10)), record
+    assert abs(record["change_urad"]) < 4 * record["u_change_urad"]
     assert _settings_warnings(record) == []
     return record
 
