@@ -96,3 +96,20 @@ def test_baseline_set_on_a_test_of_hundreds_of_cycles_gives_a_baseline(tmp_path,
         )
         == 0
     )
+
+
+def test_a_step_of_many_sigmas_gets_a_design_not_a_hang():
+    # A named step of 12.5 sigma sets the CUSUM's k at 6.25: even its limit 0 alarms less
+    # often than its share asks (only a night past k), and the limit search halved
+    # towards 0 forever. Now the CUSUM is set at 0 and the others take up the rate.
+    import time
+
+    start = time.perf_counter()
+    design = design_alarms(
+        730, 2.4 * URAD, step_rad=30 * URAD, nu=39, baseline_sd_ratio=5**-0.5, mc_nights=400_000
+    )
+    assert time.perf_counter() - start < 60
+    assert design.cusum.limit == 0.0 and design.cusum.parameter == pytest.approx(6.25)
+    # the scheme still gives the asked false-alarm rate, within its Monte Carlo error
+    assert abs(design.check.arl0 - 730) < 3 * design.check.u_arl0
+    assert design.check.step_median == 1.0

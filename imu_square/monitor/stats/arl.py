@@ -79,6 +79,8 @@ _PDF_GRID, _PDF_SCALE = 0.01, 3.0
 # and at least this many nats of decay below it, and the trapezoid's step in
 # widths (1e-13 of the peak against a rule of a fifth of the step).
 _NCT_WINDOW, _NCT_DEPTH, _NCT_STEP = 12.0, 40.0, 0.25
+# Below this the limit is 0: the chart's most sensitive setting. [1]
+_MIN_LIMIT = 1e-6
 # Run lengths beyond this are "never" to double precision: the linear system
 # that gives them is singular to rounding. [nights]
 _ARL_CAP = 1e12
@@ -346,7 +348,7 @@ class Ewma:
 
     def _solve(self, law, n):
         _, a, start = self._kernel(law, n)
-        values = np.linalg.solve(np.eye(n) - a, np.ones(n))
+        values = _run_lengths(np.eye(n) - a)
         return values, start
 
     def arl(self, law, nodes=None):
@@ -441,7 +443,7 @@ class Cusum:
         return a
 
     def _upper(self, law, n):
-        return np.linalg.solve(np.eye(n + 1) - self._kernel(law, n), np.ones(n + 1))
+        return _run_lengths(np.eye(n + 1) - self._kernel(law, n))
 
     def one_sided_arl(self, law, nodes=None):
         """Zero-state ARL of the upper half alone (``C+``). [nights]
@@ -485,7 +487,8 @@ class Cusum:
         halves = []
         for after, before in ((law, in_control), (law.mirrored(), in_control.mirrored())):
             start = _quasi_stationary(self._kernel(before, n))[0]
-            halves.append(_capped(start @ self._upper(after, n)))
+            lengths = self._upper(after, n)
+            halves.append(math.inf if np.isinf(lengths).any() else _capped(start @ lengths))
         return _either(*halves)
 
     def occupancy(self, law, nodes=None):
@@ -525,6 +528,15 @@ class Cusum:
             )
 
         return fraction
+
+
+def _run_lengths(system):
+    """Solve ``system @ L = 1`` for the run lengths; ``inf`` where the chart never alarms
+    (at a CUSUM's limit 0 with the law far below k, the system is singular)."""
+    try:
+        return np.linalg.solve(system, np.ones(len(system)))
+    except np.linalg.LinAlgError:
+        return np.full(len(system), math.inf)
 
 
 def _capped(arl):
@@ -660,7 +672,7 @@ def solve_limit(chart, arl0, law, baseline_sd=0.0, guess=None):
         return math.log(min(a, _ARL_CAP)) - math.log(arl0)
 
     # A bracket: the ARL rises with the limit; widen from the guess until it holds.
-    if guess is not None:
+    if guess:
         lo, hi = 0.8 * guess, 1.25 * guess
     elif isinstance(chart, Ewma):
         lo, hi = 1e-3 * chart.lam, 3.0 * math.sqrt(chart.lam / (2.0 - chart.lam))
@@ -668,6 +680,10 @@ def solve_limit(chart, arl0, law, baseline_sd=0.0, guess=None):
         lo, hi = 1e-3, 4.0
     f_lo, f_hi = excess(lo), excess(hi)
     while f_lo > 0.0:
+        if lo < _MIN_LIMIT:
+            # Even at limit 0 the chart alarms less often than asked: a CUSUM whose k is
+            # many sigmas (a large named step) alarms only on a night past k itself.
+            return replace(chart, limit=0.0)
         lo, hi, f_hi = 0.5 * lo, lo, f_lo
         f_lo = excess(lo)
     while f_hi < 0.0:
