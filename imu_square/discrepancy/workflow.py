@@ -6,9 +6,10 @@
    cannot analyse and gives the starting squareness, rotation and offsets;
 2. the layout of the analysed cycles and their features, and the noise floor
    from the cycle-to-cycle scatter;
-3. the base model's fit: the simulator with the program of the recording, an
+3. the base model's fit: the simulator with the program of the recording (at
+   the speed its circles ran, when a controller ran them at another), an
    ideal machine but for its squareness, the sensor's rotation and tilt, and
-   a time anchor per block;
+   a time anchor per block (started where the two directions' rotations agree);
 4. the model's growth (:mod:`imu_square.discrepancy.selection`);
 5. identifiability: signature correlations, "one of" groups and the extra
    tests that would separate them (:mod:`imu_square.discrepancy.identify`).
@@ -38,6 +39,7 @@ from imu_square.discrepancy.views import FeatureSpace
 from imu_square.discrepancy.window_noise import estimate_noise
 from imu_square.errors import AnalysisError, ConfigError
 from imu_square.log import logger
+from imu_square.pipeline.quality import PERIOD_LIMIT
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.simulate.effects import SIZE
 from imu_square.simulate.machine import MachineModel
@@ -116,7 +118,34 @@ def _initial_state(recording, run, noise, n_blocks):
         eps_c_rad=run.eps_c_rad + 0.5 * run.squareness_rad,
         tilt_rad=tuple(offsets),
     )
-    return ModelState(machine, sensor, (0.0,) * n_blocks)
+    return ModelState(machine, sensor, (_start_anchor(run),) * n_blocks)
+
+
+def _rotation(direction):
+    """The rotation a direction's fit reads: the circular mean of its theta_x and theta_y."""
+    tx, ty = direction.theta_x_rad, direction.theta_y_rad
+    return math.atan2(math.sin(tx) + math.sin(ty), math.cos(tx) + math.cos(ty))
+
+
+def _start_anchor(run):
+    """Where the blocks' time anchors start: where the two directions' rotations agree. [s]
+
+    The pipeline anchors each block's position angle at the middle of its
+    detected motion, which is the middle of its arc when the feed ramps
+    mirror each other (our own trajectory's). A controller's need not:
+    LinuxCNC's ramps down at half the acceleration it ramps up with, so on
+    the fast test the tool is 37 deg short of the middle of the arc at the
+    detected midpoint. That reads as a rotation of ``+delta`` in the CCW
+    fit and ``-delta`` in the flipped CW fit (the mean, ``eps_c``, is
+    unharmed), the signature of a time shift ``delta / omega`` of both
+    blocks, which the anchors are. Started at 0, they would have to cross
+    ``delta``: residuals beyond a few noise sigmas are clipped
+    (:class:`~imu_square.discrepancy.model_fit.Problem`), so the fit cannot
+    see the way. A common servo lag of both axes reads the same, and starts
+    the anchors the same way.
+    """
+    delta = math.remainder(_rotation(run.ccw) - _rotation(run.cw), 2 * math.pi) / 2
+    return -delta / abs(run.omega_rad_s)
 
 
 def _values(outcome, params, state=None):
@@ -248,6 +277,7 @@ def fit_base(recording, program, analysis=None, lap=None):
     analysis = analysis or AnalysisOptions(bootstrap_n=0)
     lap = lap or (lambda name: None)
     run = analyze(recording, analysis, program=program)
+    program = _as_run(program, run)
     layout = layout_from_recording(recording, program, analysis)
     lap("pipeline")
     operator = FeatureOperator(layout)
@@ -263,6 +293,18 @@ def fit_base(recording, program, analysis=None, lap=None):
     params = base_parameters(model.n_blocks)
     base = problem.fit(_initial_state(recording, run, noise, model.n_blocks), params)
     return problem, base, params
+
+
+def _as_run(program, run):
+    """The program at the speed its circles ran, when the pipeline took that speed.
+
+    A controller may run the arcs slower than programmed (LinuxCNC at its arc
+    acceleration limit); the pipeline then analyses them at their measured
+    period (:mod:`imu_square.pipeline.circle_speed`), and so does the model.
+    """
+    if abs(run.period_s / program.period_s - 1) <= PERIOD_LIMIT:
+        return program
+    return replace(program, feed_m_per_s=abs(run.omega_rad_s) * program.radius_m)
 
 
 def _residual_noise(problem, recording, outcome):
@@ -442,7 +484,7 @@ def find_discrepancy(recording, options=None, program=None):
         candidates=candidates,
         machine=state.machine,
         sensor=state.sensor,
-        program=prog,
+        program=model.layout.program,  # at the speed the circles ran
         notes=tuple(notes),
         timings_s=timings,
         evaluations=model.evaluations,

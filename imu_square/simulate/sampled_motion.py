@@ -113,6 +113,11 @@ class SampledBlock:
     analysed_window_s: tuple
     ramp_s: float
 
+    @property
+    def duration_s(self):
+        """Duration of the block's motion, ramps included. [s]"""
+        return self.t_end_s - self.t_start_s
+
     def shifted(self, dt_s):
         """The same block ``dt_s`` later. [s]"""
         a, b = self.analysed_window_s
