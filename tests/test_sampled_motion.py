@@ -89,7 +89,7 @@ def test_path_between_samples_is_the_commanded_one(motions):
     edges = np.array([(b.t_start_s, b.t_start_s + MACHINE.ramp_s) for b in timeline.blocks])
     edges = np.concatenate([edges, edges + (timeline.blocks[0].duration_s - MACHINE.ramp_s)])
     # the trapezoid's acceleration steps at the ramp ends; the spline rounds a step
-    # over a few servo periods (its error falls by 2 - sqrt(3) a period)
+    # over a few servo periods (its error falls to 0.43 of itself a period)
     far = np.all(np.abs(t[:, None] - edges.ravel()[None, :]) > 0.015, axis=1)
     step = 0.025 * PROGRAM.omega_rad_s / MACHINE.ramp_s  # tangential acceleration [m/s^2]
     for axis in (0, 1):
