@@ -468,7 +468,15 @@ class _TxBuffer:
 
 
 def emulated_board(
-    program, machine=None, sensor=None, *, faults=None, seed=0, uptime_s=0.0, **kwargs
+    program,
+    machine=None,
+    sensor=None,
+    *,
+    faults=None,
+    seed=0,
+    uptime_s=0.0,
+    motion=None,
+    **kwargs,
 ):
     """Simulate a test and build the board that streams it.
 
@@ -488,6 +496,8 @@ def emulated_board(
     uptime_s : float
         How long the board has been powered when the test starts: its counter
         starts there and its sensor is that far into its warm-up. [s]
+    motion : SampledMotion, optional
+        The commanded motion (a controller's); our own trajectory if None.
     **kwargs
         Passed to :class:`EmulatedBoard` (``link``, ``speed``, ``mode``, ...).
 
@@ -503,7 +513,9 @@ def emulated_board(
     sensor = sensor if sensor is not None else SensorModel()
     if faults.clock_ppm:
         sensor = replace(sensor, clock_ppm=faults.clock_ppm)
-    recording, truth = simulate_run(program, machine, sensor, seed=seed, uptime_s=uptime_s)
+    recording, truth = simulate_run(
+        program, machine, sensor, seed=seed, uptime_s=uptime_s, motion=motion
+    )
     kwargs.setdefault("seq_start", int(recording.seq[0]))
     board = EmulatedBoard(
         recording, faults=faults, seed=seed, clock_factor=1 + sensor.clock_ppm * 1e-6, **kwargs

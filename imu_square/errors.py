@@ -38,6 +38,10 @@ class AcquisitionError(ImuSquareError):
     """The serial link or the device misbehaved in a way the recorder cannot absorb."""
 
 
+class ControllerError(ImuSquareError):
+    """A CNC controller (LinuxCNC) is missing, cannot run the program, or ran something else."""
+
+
 class HistoryError(ImuSquareError):
     """The monitor's history cannot be opened, read or written as asked."""
 

@@ -331,9 +331,8 @@ def run_linuxcnc(path):
     env = _linuxcnc_env()
     if env is None:
         pytest.skip(
-            "LinuxCNC's interpreter is not installed: apt-get install libboost-python1.74.0, "
-            "apt-get download linuxcnc-uspace, dpkg-deb -x it to a directory and set "
-            "IMU_SQUARE_LINUXCNC_ROOT to it"
+            "LinuxCNC's interpreter is not installed: apt-get install linuxcnc-uspace (or "
+            "set IMU_SQUARE_LINUXCNC_ROOT to a copy unpacked with dpkg-deb -x)"
         )
     proc = subprocess.run(
         [sys.executable, "-c", _CANON_SCRIPT, str(path)],

@@ -145,10 +145,31 @@ def test_feed_override_is_flagged_or_refused():
     res = analyze(replace(rec, program=PROG), FAST)
     assert res.quality["period_disagreement"] == pytest.approx(1 / 0.99 - 1, rel=1e-3)
     assert any("period differs from the program by +1.01%" in w for w in res.quality["warnings"])
+
+
+def test_circles_run_slower_than_programmed_are_taken_at_their_speed():
+    # a controller's arc limit (or the feed override at 90 %): the amplitude is
+    # omega^2 r of the circle that ran, so the analysis takes the measured period
     slower = replace(PROG, feed_m_per_s=PROG.feed_m_per_s * 0.9)
-    rec, _ = synth_circle(slower, fs=100.0)
-    with pytest.raises(AnalysisError, match=r"the circles take 6\.981 s but the program implies"):
-        analyze(replace(rec, program=PROG), FAST)
+    rec, truth = synth_circle(slower, alpha=20e-6, fs=100.0, density=1e-6)
+    res = analyze(replace(rec, program=PROG), FAST)
+    assert res.period_s == pytest.approx(PROG.period_s / 0.9, rel=1e-4)
+    assert res.quality["amplitude_ratio"] == pytest.approx(1.0, abs=1e-3)  # of omega^2 r
+    (line,) = [w for w in res.quality["warnings"] if "period" in w]
+    assert line.startswith("the circles ran at 5400 mm/min, not the programmed 6000 (period +11.1%")
+    assert line.endswith("analysed at the measured period")
+    u = res.u_squareness_rad
+    assert res.squareness_rad == pytest.approx(truth["squareness_rad"], abs=3 * u)
+
+
+def test_a_wrong_sample_clock_is_refused():
+    # the sensor's clock 10 % slow: the circles seem to take longer, but their
+    # amplitude stays the program's v^2/r, not omega^2 r of the seeming period
+    rec, _ = synth_circle(PROG, fs=100.0)
+    t0 = rec.time_ns[0]
+    stretched = replace(rec, time_ns=t0 + (rec.time_ns - t0) * 11 // 10, dt_ns=rec.dt_ns * 11 // 10)
+    with pytest.raises(AnalysisError, match=r"^the circles take 6\.912 s but the program implies"):
+        analyze(stretched, FAST)
 
 
 def test_json_dict_has_the_documented_fields():

@@ -124,3 +124,6 @@ _.machines
 _.predict
 # monitor.history.store.History.baselines: every baseline of a machine, oldest first.
 _.baselines
+# linuxcnc.ini.LinuxcncLimits.arc_feed_m_s: the speed LinuxCNC runs a circle of a radius
+# at, for a user checking a program against the machine (plan uses the arc acceleration).
+_.arc_feed_m_s

@@ -5,6 +5,8 @@ import secrets
 import sys
 from pathlib import Path
 
+from imu_square.simulate.sources import MOTION_SOURCES
+
 HELP = "emulate a serial accelerometer board on a pseudo-terminal"
 
 
@@ -23,6 +25,13 @@ def register(sub):
     p.add_argument("--machine", help="machine TOML (default: an ideal machine)")
     p.add_argument(
         "--sensor", help="sensor TOML (default: the paper's ADXL355-like sensor at 1 kHz)"
+    )
+    p.add_argument(
+        "--motion",
+        choices=MOTION_SOURCES,
+        default="trajectory",
+        help="the commanded motion: our own trajectory (default) or LinuxCNC's planner "
+        "(run in real time before streaming, or from its cache)",
     )
     p.add_argument("--link", required=True, help="path of the symlink to the pty's slave end")
     p.add_argument("--speed", type=float, default=1.0, help="run N times faster than real time")
@@ -55,12 +64,14 @@ def run(args):
     from acquisition.faults import parse_faults
     from imu_square.program import read_program
     from imu_square.simulate import data_path, read_machine, read_sensor
+    from imu_square.simulate.sources import commanded_motion
 
     program = read_program(args.program)
     machine = read_machine(args.machine or data_path("machine_ideal.toml"))
     sensor = read_sensor(args.sensor or data_path("sensor_paper.toml"))
     faults = parse_faults(args.faults)
     seed = args.seed if args.seed is not None else secrets.randbits(63)
+    motion = commanded_motion(program, args.motion, lambda text: print(text, file=sys.stderr))
     board, truth = emulated_board(
         program,
         machine,
@@ -71,6 +82,7 @@ def run(args):
         speed=args.speed,
         mode=args.mode,
         seq_start=args.seq_start,
+        motion=motion,
     )
     truth_path = Path(args.truth) if args.truth else Path(args.link + ".truth.json")
     print(

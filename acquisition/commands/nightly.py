@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from imu_square.commands._output import result_stream
+from imu_square.simulate.sources import MOTION_SOURCES
 
 HELP = "record and analyse one nightly run (emulated sensor unless --port is given)"
 
@@ -50,6 +51,13 @@ def register(sub):
         help="emulated board: times faster than real time (default: %(default)s)",
     )
     p.add_argument("--seed", type=int, help="emulated board: seed of the noise")
+    p.add_argument(
+        "--motion",
+        choices=MOTION_SOURCES,
+        default="trajectory",
+        help="emulated board: the commanded motion, our own trajectory (default) or LinuxCNC's "
+        "planner running the program in real time (or its cached run); with --demo, tonight's",
+    )
     p.add_argument(
         "--trigger",
         choices=("immediate", "motion", "marker"),
@@ -91,7 +99,7 @@ def register(sub):
     p.set_defaults(func=run)
 
 
-def _start_board(program, machine_file, sensor_file, seed, speed, link, uptime_s=0.0):
+def _start_board(program, machine_file, sensor_file, seed, speed, link, uptime_s=0.0, motion=None):
     from acquisition.emulator import emulated_board
     from imu_square.simulate import data_path, read_machine, read_sensor
 
@@ -99,7 +107,14 @@ def _start_board(program, machine_file, sensor_file, seed, speed, link, uptime_s
     sensor = read_sensor(sensor_file or data_path("sensor_paper.toml"))
     seed = seed if seed is not None else secrets.randbits(31)
     board, truth = emulated_board(
-        program, machine, sensor, seed=seed, link=str(link), speed=speed, uptime_s=uptime_s
+        program,
+        machine,
+        sensor,
+        seed=seed,
+        link=str(link),
+        speed=speed,
+        uptime_s=uptime_s,
+        motion=motion,
     )
     thread = threading.Thread(target=board.run, name="emulated-board", daemon=True)
     thread.start()
@@ -112,11 +127,22 @@ def _start_board(program, machine_file, sensor_file, seed, speed, link, uptime_s
 
 
 def _record(
-    stem, program, *, port, emulated, baud, trigger, machine_id, quiet, header_timeout_s=5.0
+    stem,
+    program,
+    *,
+    port,
+    emulated,
+    baud,
+    trigger,
+    machine_id,
+    quiet,
+    header_timeout_s=5.0,
+    motion=None,
 ):
     """Record one run into ``stem.mcap``; an emulated board when ``port`` is None.
 
-    ``emulated`` is ``(machine_file, sensor_file, seed, speed[, uptime_s])``. Returns the
+    ``emulated`` is ``(machine_file, sensor_file, seed, speed[, uptime_s])``, and
+    ``motion`` the emulated machine's commanded motion (None: our own trajectory). Returns the
     recording's path, the recorder's status, its exit code and the emulated
     run's truth (None for a real board).
     """
@@ -127,7 +153,9 @@ def _record(
     board = thread = truth = None
     if port is None:
         port = str(stem.with_suffix(".tty"))
-        board, thread, truth = _start_board(program, *emulated[:4], port, *emulated[4:])
+        board, thread, truth = _start_board(
+            program, *emulated[:4], port, *emulated[4:], motion=motion
+        )
         print(
             f"emulated board on {port}: the circle test at x{emulated[3]:g} speed "
             f"({program.duration_s / emulated[3]:.0f} s)",
@@ -177,6 +205,7 @@ def run_single(args):
     from imu_square.units import SQUARENESS_UNIT, URAD
 
     program = read_program(args.program or data_path("program_paper.toml"))
+    motion = _motion(args, program, emulated=args.port is None)
     out = Path(args.out or "imu-square-out")
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"nightly-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -189,6 +218,7 @@ def run_single(args):
         trigger=args.trigger,
         machine_id=args.machine_id,
         quiet=args.quiet,
+        motion=motion,
     )
     recording = read_mcap(mcap_path)
     if program.n_feeds > 1:
@@ -263,6 +293,8 @@ def run_monitor(args, config=None):
     _check_night(config, out, not args.recording, make=not args.check)
     if args.recording and not Path(args.recording).is_file():
         raise ImuSquareError(f"{args.recording}: no such recording")
+    emulated = config.sensor.emulated and not args.recording
+    motion = None if args.check else _motion(args, program, emulated)
     if args.check and _not_made_yet(config.history_location()):
         print(
             f"{config.path}: machine {config.machine_id}, history "
@@ -298,6 +330,7 @@ def run_monitor(args, config=None):
             machine_id=config.machine_id,
             quiet=args.quiet,
             header_timeout_s=config.sensor.header_timeout_s,
+            motion=motion,
         )
     try:
         with config.open_history() as history:
@@ -368,6 +401,19 @@ def _not_made_yet(location):
         return False
     check_output_path(location)
     return True
+
+
+def _motion(args, program, emulated):
+    """The emulated machine's commanded motion (None: our own trajectory)."""
+    from imu_square.errors import ImuSquareError
+    from imu_square.simulate.sources import commanded_motion
+
+    if args.motion != "trajectory" and not emulated:
+        raise ImuSquareError(
+            f"--motion {args.motion} drives the emulated board: it cannot go with a real "
+            "board (--port, or a monitor file's sensor port) or a --recording"
+        )
+    return commanded_motion(program, args.motion, lambda text: print(text, file=sys.stderr))
 
 
 def _check_night(config, out, recording, make=True):

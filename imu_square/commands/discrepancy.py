@@ -4,6 +4,7 @@ import json
 import sys
 
 from imu_square.commands._output import result_stream
+from imu_square.simulate.sources import MOTION_SOURCES
 
 HELP = "fit the simulator to a recording, name the missing effects, show the gap shrink"
 
@@ -34,6 +35,14 @@ def register(sub):
         "for imu-square simulate",
     )
     p.add_argument("--program", help="test program TOML, overriding the recording's")
+    p.add_argument(
+        "--motion",
+        choices=MOTION_SOURCES,
+        default="trajectory",
+        help="the model's commanded motion: our own trajectory (default), or LinuxCNC's planner "
+        "running the program (in real time, or from its cache), for a test a LinuxCNC "
+        "machine ran",
+    )
     p.add_argument(
         "--significance",
         type=float,
@@ -81,8 +90,13 @@ def run(args):
             "discrepancy fits a one-feed test: record each feed on its own, or use "
             "analyze --separate-gravity for the squareness"
         )
+    motion = None
+    if args.motion != "trajectory" and prog is not None:  # no program: analyze says so
+        from imu_square.simulate.sources import commanded_motion
+
+        motion = commanded_motion(prog, args.motion, lambda text: print(text, file=sys.stderr))
     try:
-        result = find_discrepancy(recording, options, program=program)
+        result = find_discrepancy(recording, options, program=program, motion=motion)
     except AnalysisError as exc:  # the pipeline names no file: say which
         raise ImuSquareError(f"{args.recording}: {exc}") from None
     print(f"{args.recording}:", file=result_stream(args))

@@ -40,13 +40,23 @@ def register(sub):
     s.add_argument("--range-g", type=float, help="full scale [g] (default 2.048)")
     s.add_argument("--sample-rate-hz", type=float, help="sample rate [Hz] (default 1000)")
     s.add_argument("--resolution-ug", type=float, help="ADC step [ug] (default 0)")
-    m = p.add_argument_group("machine")
-    m.add_argument("--max-feed-mm-min", type=float, required=True, help="fastest feed [mm/min]")
+    m = p.add_argument_group(
+        "machine (--max-feed-mm-min and --max-accel-m-s2, or --linuxcnc-ini, or both: the "
+        "lower limits hold)"
+    )
+    m.add_argument("--max-feed-mm-min", type=float, help="fastest feed [mm/min]")
     m.add_argument(
         "--max-accel-m-s2",
         type=float,
-        required=True,
-        help="largest centripetal acceleration v^2/r for a stable circle [m/s^2]",
+        help="largest centripetal acceleration v^2/r for a stable circle [m/s^2]; a control may "
+        "allow less on arcs than on its axes (LinuxCNC: sqrt(3)/2 of the axis limit)",
+    )
+    m.add_argument(
+        "--linuxcnc-ini",
+        metavar="FILE",
+        help="the machine's LinuxCNC INI file: the fastest feed is the smaller X/Y MAX_VELOCITY "
+        "(and [TRAJ] MAX_LINEAR_VELOCITY), the largest centripetal acceleration sqrt(3)/2 of the "
+        "smaller X/Y MAX_ACCELERATION, which LinuxCNC keeps for an arc's normal acceleration",
     )
     m.add_argument(
         "--travel-mm",
@@ -151,7 +161,7 @@ def run(args):
     """Plan, print the plan, write the program file and the JSON."""
     from imu_square.errors import ProgramError
     from imu_square.program.planner import Goal, Limits, PlanInputError, plan_test
-    from imu_square.units import MM, MM_PER_MIN, MS, URAD
+    from imu_square.units import MM, MS, URAD
 
     if args.output:  # refuse a bad path before planning, not after printing the plan
         from imu_square.io.output import check_output_path
@@ -160,9 +170,10 @@ def run(args):
     sensor, sensor_eps = _sensor(args)
     eps_deg = args.eps_c_deg
     eps = math.radians(eps_deg) if eps_deg is not None else sensor_eps
+    max_feed_m_s, max_accel_m_s2 = _machine_limits(args)
     limits = Limits(
-        max_feed_m_s=args.max_feed_mm_min * MM_PER_MIN,
-        max_accel_m_s2=args.max_accel_m_s2,
+        max_feed_m_s=max_feed_m_s,
+        max_accel_m_s2=max_accel_m_s2,
         travel_m=args.travel_mm * MM,
         time_s=args.time_s,
         servo_lags_s=tuple(t * MS for t in args.servo_lags_ms),
@@ -226,6 +237,38 @@ def _monitor_detection(plan, alarms):
     )
     check = design.check
     return MonitorDetection(alarms.false_alarm_nights, step, check.step_median, check.step_p90)
+
+
+def _machine_limits(args):
+    """Fastest feed [m/s] and largest centripetal acceleration [m/s^2]: the flags', the
+    LinuxCNC INI file's, or the lower of both."""
+    from imu_square.errors import ConfigError
+    from imu_square.units import MM_PER_MIN
+
+    feed = None if args.max_feed_mm_min is None else args.max_feed_mm_min * MM_PER_MIN
+    accel = args.max_accel_m_s2
+    if args.linuxcnc_ini is None:
+        missing = [
+            f for f, v in (("--max-feed-mm-min", feed), ("--max-accel-m-s2", accel)) if v is None
+        ]
+        if missing:
+            raise ConfigError(
+                f"plan: the machine's limits are needed: give {' and '.join(missing)}, or the "
+                "machine's LinuxCNC INI file with --linuxcnc-ini"
+            )
+        return feed, accel
+    from imu_square.linuxcnc.ini import read_limits
+
+    ini = read_limits(args.linuxcnc_ini)
+    print(
+        f"{args.linuxcnc_ini}: feed up to {ini.max_feed_m_s / MM_PER_MIN:g} mm/min; arcs at up "
+        f"to {ini.arc_accel_m_s2:.4g} m/s² (sqrt(3)/2 of the axes' "
+        f"{min(ini.max_accel_m_s2):g} m/s², as LinuxCNC plans an arc)",
+        file=sys.stderr,
+    )
+    feed = ini.max_feed_m_s if feed is None else min(feed, ini.max_feed_m_s)
+    accel = ini.arc_accel_m_s2 if accel is None else min(accel, ini.arc_accel_m_s2)
+    return feed, accel
 
 
 def _in_flag_units(exc, args):

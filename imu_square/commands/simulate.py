@@ -15,6 +15,7 @@ from imu_square.simulate import (
     simulate_run,
     with_effects,
 )
+from imu_square.simulate.sources import MOTION_SOURCES, commanded_motion
 from imu_square.units import SQUARENESS_UNIT, URAD
 
 HELP = "simulate a circle test (physics of machine and sensor) with its ground truth"
@@ -41,6 +42,14 @@ def register(sub):
         help="comma-separated effects to switch on at their default size, on top of the "
         f"machine and sensor files: {', '.join(EFFECTS)}",
     )
+    p.add_argument(
+        "--motion",
+        choices=MOTION_SOURCES,
+        default="trajectory",
+        help="the commanded motion: our own trajectory (default) or LinuxCNC's trajectory "
+        "planner running the program in real time (Debian's linuxcnc-uspace; each program's "
+        "motion is cached, see the README)",
+    )
     p.add_argument("--no-events", action="store_true", help="write no block start/end events")
     p.add_argument("--truth", help="truth JSON path (default: OUTPUT with .truth.json)")
     p.add_argument(
@@ -63,8 +72,15 @@ def run(args):
         t0_ns = time.time_ns() // 1_000_000_000 * 1_000_000_000
     else:
         t0_ns = parse_start_time(args.start_time)
+    motion = commanded_motion(program, args.motion, lambda text: print(text, file=sys.stderr))
     recording, truth = simulate_run(
-        program, machine, sensor, seed=args.seed, events=not args.no_events, t0_ns=t0_ns
+        program,
+        machine,
+        sensor,
+        seed=args.seed,
+        events=not args.no_events,
+        t0_ns=t0_ns,
+        motion=motion,
     )
     out = Path(args.output)
     truth_path = Path(args.truth) if args.truth else out.with_name(out.stem + ".truth.json")

@@ -5,8 +5,10 @@ the simulator is evaluated at its true time
 
     tau = T_b + anchor_b + (t - t_mid_b) / (1 + ppm 1e-6)
 
-where ``T_b`` is the commanded motion midpoint of block ``b`` on the
-simulator's timeline (3 s lead-in, as ``imu-square simulate`` lays it),
+where ``T_b`` is when the tool is at the middle of block ``b``'s arc on the
+simulator's timeline (3 s lead-in, as ``imu-square simulate`` lays it; the
+middle of its motion when the feed ramps mirror each other, as our own
+trajectory's do; a controller's motion, when given, need not),
 ``t_mid_b`` the motion midpoint the pipeline detected in the recording, and
 ``ppm`` the sensor's clock error (the recording's clock runs ``ppm`` fast,
 as in :func:`imu_square.simulate.simulate_run`).
@@ -31,6 +33,7 @@ import numpy as np
 from imu_square.simulate.signal import axis_motion, axis_parameters, model_timeline, sense_motion
 
 LEAD_IN_S = 3.0
+LEAD_OUT_S = 3.0
 
 
 class ForwardModel:
@@ -42,11 +45,15 @@ class ForwardModel:
         The analysed samples.
     operator : FeatureOperator
         Their features.
+    motion : SampledMotion, optional
+        The commanded motion, a controller's; our own trajectory of the
+        layout's program (with the machine's feed ramps) if None.
     """
 
-    def __init__(self, layout, operator):
+    def __init__(self, layout, operator, motion=None):
         self.layout = layout
         self.operator = operator
+        self.motion = None if motion is None else motion.placed(LEAD_IN_S, LEAD_OUT_S)
         self._timelines = {}
         self._t_mid = np.array([b.t_mid_s for b in layout.blocks])[layout.sample_block]
         self._index = np.array([b.index for b in layout.blocks])
@@ -69,7 +76,9 @@ class ForwardModel:
         return value
 
     def timeline(self, machine):
-        """The simulator's timeline of the program for this machine's feed ramps."""
+        """The simulator's timeline of the program for this machine's feed ramps, or the motion."""
+        if self.motion is not None:
+            return self.motion
         key = (machine.ramp_s, machine.ramp_profile)
         if key not in self._timelines:
             self._timelines[key] = model_timeline(self.layout.program, machine, LEAD_IN_S)
@@ -79,7 +88,7 @@ class ForwardModel:
         """Simulator time of each analysed sample. [s]"""
         tl = self.timeline(state.machine)
         mids = np.array(
-            [tl.blocks[i].t_start_s + 0.5 * tl.blocks[i].duration_s for i in self._index]
+            [tl.blocks[i].time_at_progress(0.5 * tl.blocks[i].angle_rad) for i in self._index]
         )
         anchors = np.asarray(state.anchors_s, dtype=float)[self.layout.sample_block]
         scale = 1.0 + state.sensor.clock_ppm * 1e-6

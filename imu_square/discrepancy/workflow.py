@@ -6,9 +6,10 @@
    cannot analyse and gives the starting squareness, rotation and offsets;
 2. the layout of the analysed cycles and their features, and the noise floor
    from the cycle-to-cycle scatter;
-3. the base model's fit: the simulator with the program of the recording, an
+3. the base model's fit: the simulator with the program of the recording (at
+   the speed its circles ran, when a controller ran them at another), an
    ideal machine but for its squareness, the sensor's rotation and tilt, and
-   a time anchor per block;
+   a time anchor per block (started where the two directions' rotations agree);
 4. the model's growth (:mod:`imu_square.discrepancy.selection`);
 5. identifiability: signature correlations, "one of" groups and the extra
    tests that would separate them (:mod:`imu_square.discrepancy.identify`).
@@ -39,6 +40,7 @@ from imu_square.discrepancy.views import FeatureSpace
 from imu_square.discrepancy.window_noise import estimate_noise
 from imu_square.errors import AnalysisError, ConfigError
 from imu_square.log import logger
+from imu_square.pipeline.quality import PERIOD_LIMIT
 from imu_square.pipeline.squareness import AnalysisOptions, analyze
 from imu_square.simulate.effects import SIZE
 from imu_square.simulate.machine import MachineModel
@@ -117,7 +119,34 @@ def _initial_state(recording, run, noise, n_blocks):
         eps_c_rad=run.eps_c_rad + 0.5 * run.squareness_rad,
         tilt_rad=tuple(offsets),
     )
-    return ModelState(machine, sensor, (0.0,) * n_blocks)
+    return ModelState(machine, sensor, (_start_anchor(run),) * n_blocks)
+
+
+def _rotation(direction):
+    """The rotation a direction's fit reads: the circular mean of its theta_x and theta_y."""
+    tx, ty = direction.theta_x_rad, direction.theta_y_rad
+    return math.atan2(math.sin(tx) + math.sin(ty), math.cos(tx) + math.cos(ty))
+
+
+def _start_anchor(run):
+    """Where the blocks' time anchors start: where the two directions' rotations agree. [s]
+
+    The pipeline anchors each block's position angle at the middle of its
+    detected motion, which is the middle of its arc when the feed ramps
+    mirror each other (our own trajectory's). A controller's need not:
+    LinuxCNC's ramps down at half the acceleration it ramps up with, so on
+    the fast test the tool is 37 deg short of the middle of the arc at the
+    detected midpoint. That reads as a rotation of ``+delta`` in the CCW
+    fit and ``-delta`` in the flipped CW fit (the mean, ``eps_c``, is
+    unharmed), the signature of a time shift ``delta / omega`` of both
+    blocks, which the anchors are. Started at 0, they would have to cross
+    ``delta``: residuals beyond a few noise sigmas are clipped
+    (:class:`~imu_square.discrepancy.model_fit.Problem`), so the fit cannot
+    see the way. A common servo lag of both axes reads the same, and starts
+    the anchors the same way.
+    """
+    delta = math.remainder(_rotation(run.ccw) - _rotation(run.cw), 2 * math.pi) / 2
+    return -delta / abs(run.omega_rad_s)
 
 
 def _values(outcome, params, state=None):
@@ -218,7 +247,7 @@ def _members(step, state):
     return out
 
 
-def fit_base(recording, program, analysis=None, lap=None):
+def fit_base(recording, program, analysis=None, lap=None, motion=None):
     """The recording's features, noise floor and the base model fitted to them.
 
     Parameters
@@ -231,6 +260,9 @@ def fit_base(recording, program, analysis=None, lap=None):
         The pipeline's options (no bootstrap by default).
     lap : callable, optional
         Called with a stage name when the pipeline and the features are done.
+    motion : SampledMotion, optional
+        The commanded motion the model takes (a controller's); our own
+        trajectory if None.
 
     Returns
     -------
@@ -249,6 +281,7 @@ def fit_base(recording, program, analysis=None, lap=None):
     analysis = analysis or AnalysisOptions(bootstrap_n=0)
     lap = lap or (lambda name: None)
     run = analyze(recording, analysis, program=program)
+    program = _as_run(program, run)
     layout = layout_from_recording(recording, program, analysis)
     lap("pipeline")
     operator = FeatureOperator(layout)
@@ -258,12 +291,47 @@ def fit_base(recording, program, analysis=None, lap=None):
         operator.cycle_spectra(xy), layout, recording.sample_rate_hz, recording.duration_s
     )
     space = FeatureSpace(layout, operator, noise, data)
-    model = ForwardModel(layout, operator)
+    model = ForwardModel(layout, operator, motion)
     problem = Problem(model, space, xy)
     lap("features")
     params = base_parameters(model.n_blocks)
-    base = problem.fit(_initial_state(recording, run, noise, model.n_blocks), params)
+    start = _align_anchors(problem, _initial_state(recording, run, noise, model.n_blocks))
+    base = problem.fit(start, params)
     return problem, base, params
+
+
+def _align_anchors(problem, state, iterations=3, step_s=1e-5):
+    """Shift all blocks' anchors together onto the recording, on the unclipped residual.
+
+    The anchors' start (:func:`_start_anchor`) comes from the pipeline's
+    phases, which are off by a fraction of a millisecond where the model's
+    motion differs from the recording's ramps; on a quiet sensor that is many
+    noise sigmas, where the fit's clipped residual is flat. A few Gauss-Newton
+    steps of the one common shift on the plain residual close it: a common
+    time shift is orthogonal to the sensor's rotation, which moves both
+    directions' phases the same way.
+    """
+    model = problem.model
+    shift = 0.0
+    for _ in range(iterations):
+        here = replace(state, anchors_s=tuple(a + shift for a in state.anchors_s))
+        there = replace(here, anchors_s=tuple(a + step_s for a in here.anchors_s))
+        now = model.samples(here)
+        slope = (model.samples(there) - now) / step_s
+        shift += float(np.sum(slope * (problem.data_xy - now)) / np.sum(slope * slope))
+    return replace(state, anchors_s=tuple(a + shift for a in state.anchors_s))
+
+
+def _as_run(program, run):
+    """The program at the speed its circles ran, when the pipeline took that speed.
+
+    A controller may run the arcs slower than programmed (LinuxCNC at its arc
+    acceleration limit); the pipeline then analyses them at their measured
+    period (:mod:`imu_square.pipeline.circle_speed`), and so does the model.
+    """
+    if abs(run.period_s / program.period_s - 1) <= PERIOD_LIMIT:
+        return program
+    return replace(program, feed_m_per_s=abs(run.omega_rad_s) * program.radius_m)
 
 
 def _residual_noise(problem, recording, outcome):
@@ -289,7 +357,7 @@ def _residual_noise(problem, recording, outcome):
 
 
 @one_blas_thread()  # many small least-squares problems (imu_square.blas)
-def find_discrepancy(recording, options=None, program=None):
+def find_discrepancy(recording, options=None, program=None, motion=None):
     """Compare a recording with the simulator, name the missing effects, add them.
 
     Parameters
@@ -300,6 +368,9 @@ def find_discrepancy(recording, options=None, program=None):
         Defaults if None.
     program : TestProgram, optional
         Overrides ``recording.program``.
+    motion : SampledMotion, optional
+        The commanded motion the model takes: the controller's that ran the
+        test (:mod:`imu_square.linuxcnc`); our own trajectory if None.
 
     Returns
     -------
@@ -328,7 +399,7 @@ def find_discrepancy(recording, options=None, program=None):
         timings[name] = now - t
         t = now
 
-    problem, base, base_params = fit_base(recording, prog, opts.analysis, lap)
+    problem, base, base_params = fit_base(recording, prog, opts.analysis, lap, motion)
     base_gap = problem.gaps(base)
     lap("base_fit")
     model = problem.model
@@ -444,7 +515,7 @@ def find_discrepancy(recording, options=None, program=None):
         candidates=candidates,
         machine=state.machine,
         sensor=state.sensor,
-        program=prog,
+        program=model.layout.program,  # at the speed the circles ran
         notes=tuple(notes),
         timings_s=timings,
         evaluations=model.evaluations,

@@ -167,7 +167,18 @@ def outlier_fractions(mean_fit):
     return out
 
 
-def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad, floor, filtered):
+def quality_flags(
+    recording,
+    seg,
+    cyc,
+    clipped,
+    amplitude_ratio,
+    outliers,
+    u_rad,
+    floor,
+    filtered,
+    speed_warning=None,
+):
     """Quality flags of a result that stands, each oddity with a line a machinist can act on.
 
     Parameters
@@ -181,7 +192,8 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
     clipped : ndarray
         Times of clipped samples. [s]
     amplitude_ratio : float
-        Measured amplitude over ``v^2/r``.
+        Measured amplitude over that of the circle analysed (``v^2/r``, or
+        ``omega^2 r`` when the circles ran at another speed than programmed).
     outliers : list of float
         Rejected fraction of each direction's mean trace.
     u_rad : float
@@ -190,6 +202,10 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
         The noise floor.
     filtered : FilteredRecording
         The samples as filtered (cutoff, bridged gaps).
+    speed_warning : str, optional
+        Why the circles were analysed at the speed they ran at rather than
+        the programmed one (:mod:`imu_square.pipeline.circle_speed`); it
+        replaces the period flag.
 
     Returns
     -------
@@ -232,7 +248,9 @@ def quality_flags(recording, seg, cyc, clipped, amplitude_ratio, outliers, u_rad
             f"amplitude is {amplitude_ratio:.3f} x v^2/r: feed override, radius or sensor gain "
             f"differ from the program"
         )
-    if abs(seg.period_disagreement) > PERIOD_FLAG:
+    if speed_warning is not None:
+        warnings.append(speed_warning)
+    elif abs(seg.period_disagreement) > PERIOD_FLAG:
         warnings.append(
             f"circle period differs from the program by {seg.period_disagreement:+.2%}: "
             f"feed override or sample clock error"

@@ -39,6 +39,7 @@ from imu_square.errors import AnalysisError
 from imu_square.log import logger
 from imu_square.pipeline import quality as q
 from imu_square.pipeline.align import bad_intervals, cycle_traces, interpolation_gain
+from imu_square.pipeline.circle_speed import circle_speed
 from imu_square.pipeline.filter import filter_recording, passband_gain
 from imu_square.pipeline.noise_floor import noise_floor
 from imu_square.pipeline.options import AnalysisOptions
@@ -142,13 +143,15 @@ def analyze(recording, options=None, program=None):
     ------
     AnalysisError
         No program; no circle matching the program; a block turning the wrong
-        way; an amplitude or a period far from the program's; too few usable
-        cycles. The message does not name the recording: the caller does.
+        way; a period far from the program's that the amplitude does not
+        confirm (a controller that ran the arcs slower is taken at its measured
+        speed, with a warning: :mod:`imu_square.pipeline.circle_speed`); an
+        amplitude far from the circle's; too few usable cycles. The message
+        does not name the recording: the caller does.
     """
     opts = options or AnalysisOptions()
     prog = _program_of(recording, program)
     data, seg = filter_and_segment(recording, prog, opts.cutoff_hz, opts.order)
-    q.check_period(seg.period_disagreement, seg.period_s, prog)
     clipped, cyc = trace_cycles(recording, data, seg, opts.grid_points)
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
@@ -156,7 +159,7 @@ def analyze(recording, options=None, program=None):
     f0, fs = 1 / seg.period_s, data.sample_rate_hz
     gain = passband_gain(f0, data.cutoff_hz, opts.order, fs) * interpolation_gain(f0, fs)
     mean = fit_mean_traces(cyc, gain, norm, **irls)
-    amplitude_ratio = q.check_amplitude(mean.amplitude_m_s2, prog)
+    speed = circle_speed(seg, mean.amplitude_m_s2, prog)
     eps_c = estimate_eps_c(mean)
     cos2 = math.cos(2 * eps_c)
     cycles = fit_cycles(cyc, mean, cos2, seg.period_s, norm, irls, opts.bootstrap_n, opts.seed)
@@ -170,7 +173,16 @@ def analyze(recording, options=None, program=None):
     floor = noise_floor(data, seg, cyc, mean, recording.sensor)
     outliers = q.outlier_fractions(mean)
     quality = q.quality_flags(
-        recording, seg, cyc, clipped, amplitude_ratio, outliers, u_sq, floor, data
+        recording,
+        seg,
+        cyc,
+        clipped,
+        speed.amplitude_ratio,
+        outliers,
+        u_sq,
+        floor,
+        data,
+        speed_warning=speed.warning(prog),
     )
     for w in quality["warnings"]:
         logger.debug("quality: %s", w)

@@ -11,14 +11,14 @@ import secrets
 
 import numpy as np
 
-from imu_square.errors import ConfigError
+from imu_square.errors import ConfigError, ControllerError
 from imu_square.io.recording import Event, Recording, SensorInfo
 from imu_square.simulate.kinematics import carriage_motion, carriage_tilt
 from imu_square.simulate.machine import MachineModel
 from imu_square.simulate.sensor import SensorModel
 from imu_square.simulate.sensor_noise import digitise, sensor_noise
 from imu_square.simulate.trajectory import build_timeline
-from imu_square.simulate.truth import build_truth
+from imu_square.simulate.truth import build_truth, trajectory_source
 
 DEFAULT_T0_NS = 1_700_000_000_000_000_000
 
@@ -49,6 +49,7 @@ def simulate_run(
     events=True,
     t0_ns=DEFAULT_T0_NS,
     uptime_s=0.0,
+    motion=None,
 ):
     """Simulate the accelerometer recording of a circle test.
 
@@ -73,6 +74,11 @@ def simulate_run(
         How long the sensor board has been powered at the first sample: its
         sample counter starts there, and its warm-up (thermal drift,
         temperature) is that far along. [s]
+    motion : SampledMotion, optional
+        What the axes were commanded to do: a controller's sampled motion of
+        ``program`` (:mod:`imu_square.simulate.sampled_motion`), placed here
+        with ``lead_in_s`` and ``lead_out_s``. By default our own trajectory
+        (:mod:`imu_square.simulate.trajectory`) with the machine's feed ramps.
 
     Returns
     -------
@@ -92,7 +98,18 @@ def simulate_run(
             raise ConfigError(f"{name} must be a finite number >= 0, got {value!r}")
     if seed is None:
         seed = secrets.randbits(63)
-    timeline = build_timeline(program, machine.ramp_s, machine.ramp_profile, lead_in_s, lead_out_s)
+    if motion is None:
+        timeline = build_timeline(
+            program, machine.ramp_s, machine.ramp_profile, lead_in_s, lead_out_s
+        )
+        run_program, source = program, trajectory_source(machine)
+    elif motion.program != program:
+        raise ControllerError(
+            "the motion given was sampled from another program than the one given"
+        )
+    else:
+        timeline = motion.placed(lead_in_s, lead_out_s)
+        run_program, source = motion.as_run(program), motion.source
     dt_ns = round(1e9 / sensor.sample_rate_hz)
     clock_factor = 1.0 + sensor.clock_ppm * 1e-6
     n = math.floor(timeline.duration_s * clock_factor * 1e9 / dt_ns) + 1
@@ -128,7 +145,12 @@ def simulate_run(
         temperature_c=sensor.temperature_at(t + uptime_s),
         metadata={"producer": "imu-square simulate", "seed": str(seed)},
     )
-    truth = build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s)
+    truth = build_truth(
+        program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s, run_program
+    )
+    truth["motion"] = source
+    if motion is not None:
+        truth["ramp_s"], truth["ramp_profile"] = timeline.ramp_s, "sampled"
     truth["n_samples"] = n
     truth["t0_ns"] = t0_ns
     return recording, truth

@@ -46,7 +46,15 @@ Keys (the table "Quantity names" in ``docs/model.md`` lists them all):
   ``expected_squareness_rad``; the top-level keys
   of the same names are the first feed's;
 - ``omega_rad_s``, ``amplitude_m_s2 = v^2/r``, ``sample_rate_hz``,
-  ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``;
+  ``clock_ppm``, ``noise_density_m_s2_rthz``, ``ramp_s``, ``ramp_profile``
+  (on a controller's motion: the mean time its blocks took from rest to
+  cruise, and ``"sampled"``); the feed-dependent keys are those of the feed
+  the axes ran, which a controller may hold below the program's;
+- ``motion``: where the commanded motion came from: ``{"source":
+  "imu-square trajectory", "ramp_s", "ramp_profile"}``, or a controller's
+  (:class:`~imu_square.simulate.sampled_motion.SampledMotion`: its name and
+  version, its configuration, the NC program's digest, the feeds as run and
+  each block's ramp);
 - ``effects``: the named effects that are on, with their parameters (SI);
 - ``seed``, ``program`` (file units), ``n_samples``, ``t0_ns``, ``uptime_s`` (the
   sensor's time since power-on at the first sample);
@@ -164,7 +172,36 @@ def _servo_delay_at(timeline, t_s, tau_s, model):
     return servo_response(block.omega_rad_s, tau_s, model)[1]
 
 
-def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, uptime_s=0.0):
+def trajectory_source(machine):
+    """The truth's ``motion`` entry for our own trajectory.
+
+    Parameters
+    ----------
+    machine : MachineModel
+        The machine (its feed ramps).
+
+    Returns
+    -------
+    dict
+    """
+    return {
+        "source": "imu-square trajectory",
+        "ramp_s": machine.ramp_s,
+        "ramp_profile": machine.ramp_profile,
+    }
+
+
+def build_truth(
+    program,
+    machine,
+    sensor,
+    timeline,
+    seed,
+    clock_factor,
+    t0_ns,
+    uptime_s=0.0,
+    run_program=None,
+):
     """The truth dictionary of one run.
 
     Parameters
@@ -175,8 +212,8 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         The machine.
     sensor : SensorModel
         The sensor.
-    timeline : Timeline
-        The true timeline of the run.
+    timeline : Timeline or SampledMotion
+        The commanded motion of the run.
     seed : int
         Seed of the noise.
     clock_factor : float
@@ -185,6 +222,9 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
         Recording time of the first sample. [ns]
     uptime_s : float
         The sensor's time since power-on at the first sample (thermal drift). [s]
+    run_program : TestProgram, optional
+        The program at the feeds the axes ran (a controller may run an arc
+        slower than programmed); ``program`` if None.
 
     Returns
     -------
@@ -232,8 +272,9 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
     yaw = float(geometry.carriage_yaw(cx, cy))
     eps = sensor.eps_c_rad + yaw
     harmonics = circle - local
+    run = program if run_program is None else run_program
     feeds = [
-        _feed_truth(program.at_feed(f), machine, (beta, t_mean), eps, harmonics)
+        _feed_truth(run.at_feed(f), machine, (beta, t_mean), eps, harmonics)
         for f in range(program.n_feeds)
     ]
     first = feeds[0]
@@ -241,7 +282,7 @@ def build_truth(program, machine, sensor, timeline, seed, clock_factor, t0_ns, u
     level = replace(machine, tilt_per_m=(0.0, 0.0, 0.0, 0.0))
     gravity_free = (
         _exact_theta_diff(
-            program.at_feed(0),
+            run.at_feed(0),
             level,
             (beta, t_mean),
             eps,
