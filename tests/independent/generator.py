@@ -261,8 +261,9 @@ class Mode:
     participation : float
         ``kappa``: share of the drive's acceleration that excites the mode.
     friction_m_s2 : float
-        ``mu``: friction force per moving mass that flips sign at each
-        reversal and excites the mode. [m/s^2]
+        ``mu``: friction force per moving mass, ``-mu tanh(v / v_s)`` on the
+        mode (opposing the axis's velocity), that flips at each reversal and
+        excites the mode. [m/s^2]
     friction_velocity_m_s : float
         ``v_s``: velocity over which the friction force turns over. [m/s]
     """
@@ -363,6 +364,28 @@ class Effects:
     tilt_gradient_rad_m: tuple = ((0.0, 0.0), (0.0, 0.0))
     kinematics: str = "tool"
 
+    def __post_init__(self):
+        for f in fields(self):
+            kind = _NESTED.get(f.name)
+            value = getattr(self, f.name)
+            if kind is not None and isinstance(value, dict):
+                setattr(self, f.name, kind(**value))
+        self.spikes = [s if isinstance(s, Spike) else Spike(**s) for s in self.spikes]
+
+
+_NESTED = {
+    "servo_x": Servo,
+    "servo_y": Servo,
+    "lost_motion_x": LostMotion,
+    "lost_motion_y": LostMotion,
+    "mode_x": Mode,
+    "mode_y": Mode,
+    "straightness_x": Straightness,
+    "straightness_y": Straightness,
+    "cyclic_x": Cyclic,
+    "cyclic_y": Cyclic,
+}
+
 
 @dataclass
 class Sensor:
@@ -459,30 +482,11 @@ def _coerce(cls, value):
         return value
     if not isinstance(value, dict):
         raise TypeError(f"{cls.__name__}: expected a dict or {cls.__name__}, got {value!r}")
-    nested = {
-        "servo_x": Servo,
-        "servo_y": Servo,
-        "lost_motion_x": LostMotion,
-        "lost_motion_y": LostMotion,
-        "mode_x": Mode,
-        "mode_y": Mode,
-        "straightness_x": Straightness,
-        "straightness_y": Straightness,
-        "cyclic_x": Cyclic,
-        "cyclic_y": Cyclic,
-    }
     names = {f.name for f in fields(cls)}
     unknown = sorted(set(value) - names)
     if unknown:
         raise TypeError(f"{cls.__name__}: unknown field {unknown[0]!r}; allowed: {sorted(names)}")
-    kwargs = {}
-    for key, item in value.items():
-        if cls is Effects and key in nested and isinstance(item, dict):
-            item = nested[key](**item)
-        if cls is Effects and key == "spikes":
-            item = [s if isinstance(s, Spike) else Spike(**s) for s in item]
-        kwargs[key] = item
-    return cls(**kwargs)
+    return cls(**value)
 
 
 def _plain(obj):
@@ -1144,7 +1148,7 @@ def _lost_mask(sensor, n, rng):
     keep = np.ones(n, dtype=bool)
     dt = 1.0 / sensor.rate_hz
     for a, b in sensor.gaps_s:
-        i0, i1 = math.ceil(a / dt), math.floor(b / dt)
+        i0, i1 = math.ceil(a / dt - 1e-9), math.floor(b / dt + 1e-9)
         keep[max(i0, 1) : min(i1 + 1, n - 1)] = False
     if sensor.loss_fraction > 0:
         mean = max(float(sensor.mean_gap_samples), 1.0)
