@@ -1496,6 +1496,9 @@ def _truth(program, effects, sensor, motion, path, state, per_feed, seed):
         "squareness_expected_rad": first["expected"]["theta_diff_rad"],
         "squareness_projected_rad": first.get("projected", {}).get("theta_diff_rad", math.nan),
         "servo_mismatch_expected_rad": first["expected"]["servo_mismatch_rad"],
+        "servo_lag_difference_rad": _servo_lag_difference(
+            effects, program.feeds[0] / program.radius_m
+        ),
         "eps_c_rad": eps,
         "eps_c_mean_rad": eps + (beta - alpha) / 2.0,
         "per_feed": per_feed,
@@ -1522,6 +1525,23 @@ def _truth(program, effects, sensor, motion, path, state, per_feed, seed):
         "per_effect": _per_effect(program, effects, sensor),
     }
     return truth
+
+
+def _servo_lag_difference(effects, omega):
+    """``arg H_x - arg H_y`` at the circle frequency: ``omega (d_y - d_x) + atan(omega tau_y)
+    - atan(omega tau_x)``, the servos' own phase mismatch. [rad]
+
+    ``servo_mismatch_expected_rad`` (half the CCW minus CW difference of
+    ``theta_y - theta_x``) equals it times ``cos(2 eps_c)`` to first order, plus
+    whatever else flips with the direction (lost motion, the spikes' asymmetry,
+    the modes' damping).
+    """
+    sx, sy = effects.servo_x, effects.servo_y
+    return (
+        omega * (sy.delay_s - sx.delay_s)
+        + math.atan(omega * sy.tau_s)
+        - math.atan(omega * sx.tau_s)
+    )
 
 
 def _isolated(effects):
