@@ -163,7 +163,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields, is_dataclass
+from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 
 import numpy as np
 from scipy import linalg, signal
@@ -1368,7 +1368,10 @@ def generate(program, effects=None, sensor=None, seed=0, motion=None):
         ``squareness_projected_rad`` (the same measured on the noise-free
         readings), ``measurand_rad`` (Eq. 4: ``alpha_eff + beta``, where
         ``alpha_eff`` adds the straightness's local squareness on this
-        circle), ``eps_c_rad`` (sensor x axis), ``eps_c_mean_rad`` (mean
+        circle), ``squareness_without_transients_rad`` (the closed form
+        with lost motion, spikes and friction-rung modes taken out: what an
+        analysis that rejects the reversals aims at), ``eps_c_rad`` (sensor
+        x axis), ``eps_c_mean_rad`` (mean
         misalignment of the sensor's axes from the machine's:
         ``eps_c + (beta - alpha) / 2``), and per-effect detail.
     """
@@ -1495,6 +1498,7 @@ def _truth(program, effects, sensor, motion, path, state, per_feed, seed):
         "squareness_geometric_exact_rad": exact_geom,
         "squareness_expected_rad": first["expected"]["theta_diff_rad"],
         "squareness_projected_rad": first.get("projected", {}).get("theta_diff_rad", math.nan),
+        "squareness_without_transients_rad": _without_transients(program, effects, sensor),
         "servo_mismatch_expected_rad": first["expected"]["servo_mismatch_rad"],
         "servo_lag_difference_rad": _servo_lag_difference(
             effects, program.feeds[0] / program.radius_m
@@ -1525,6 +1529,32 @@ def _truth(program, effects, sensor, motion, path, state, per_feed, seed):
         "per_effect": _per_effect(program, effects, sensor),
     }
     return truth
+
+
+def _without_transients(program, effects, sensor):
+    """Closed-form ``theta_y - theta_x`` with the reversal transients taken out. [rad]
+
+    Lost motion, friction spikes and friction-rung modes live at the axis
+    reversals; an analysis that rejects the reversals (a robust fit) aims at
+    this value rather than at the least-squares fundamental
+    (``squareness_expected_rad``). The two differ by the transients' share of
+    the fundamental, mostly an amplitude change seen through the sensor
+    rotation (``-2 eps_c dA/A``).
+    """
+    quiet = replace(
+        effects,
+        spikes=[],
+        lost_motion_x=LostMotion(),
+        lost_motion_y=LostMotion(),
+        mode_x=effects.mode_x and replace(effects.mode_x, friction_m_s2=0.0),
+        mode_y=effects.mode_y and replace(effects.mode_y, friction_m_s2=0.0),
+    )
+    omega = program.feeds[0] / program.radius_m
+    pair = [
+        expected_phasors(quiet, sensor, omega, s, program.radius_m, program.centre_m)
+        for s in (1, -1)
+    ]
+    return _direction_summary(pair)["theta_diff_rad"]
 
 
 def _servo_lag_difference(effects, omega):

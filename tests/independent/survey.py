@@ -242,7 +242,9 @@ def survey_discrepancy(out_dir, prog=PAPER, seed=7, names=None):
             timeout=1800,
         )
         (path.with_suffix(".discrepancy.json")).write_text(proc.stdout)
-        row = {"case": name, "exit": proc.returncode, "stderr": proc.stderr.strip()[-400:]}
+        (path.with_suffix(".discrepancy.txt")).write_text(proc.stderr)
+        lines = [ln for ln in proc.stderr.splitlines() if ln and not ln.startswith(" ")]
+        row = {"case": name, "exit": proc.returncode, "headline": lines[2:4], "tail": lines[-1:]}
         try:
             doc = json.loads(proc.stdout)
             row["summary"] = _summarise_discrepancy(doc)

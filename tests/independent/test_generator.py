@@ -35,6 +35,7 @@ from generator import (
 from numpy.testing import assert_allclose
 from scipy import signal
 
+from imu_square.errors import AnalysisError
 from imu_square.program.spec import TestProgram
 
 # A short, quick circle: r = 50 mm at 6000 mm/min (omega = 2 rad/s), 3 cycles each way.
@@ -611,3 +612,137 @@ def test_pipeline_recovers_clean_truth(prog, alpha, eps, beta, seed):
     assert abs(result.eps_c_rad - truth["eps_c_mean_rad"]) <= 3 * result.u_eps_c_rad
     # the stated uncertainty is near the Cramer-Rao bound, not inflated
     assert u < 3 * result.crb_rad
+
+
+# --------------------------------------------------------------------------- known disagreements
+# Cases that should be clean, or whose truth is known, where the project's
+# analysis and this generator disagree today. Strict xfails: when the analysis
+# changes so that one passes, pytest reports it and the mark should go.
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AnalysisError,
+    reason="a program with dwell_s = 0 is refused (no rest to segment)",
+)
+def test_known_dwell_zero_program_is_analysed():
+    rec, truth = generate(
+        TestProgram(dwell_s=0.0),
+        Effects(squareness_rad=100e-6),
+        Sensor(eps_c_rad=0.0367),
+        seed=3,
+        motion=Motion(oversample=2),
+    )
+    result, _ = _analyze(rec)
+    assert (
+        abs(result.squareness_rad - truth["squareness_expected_rad"]) <= 3 * result.u_squareness_rad
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="on a moving-table machine eps_c comes out shifted by pi",
+)
+def test_known_moving_table_sensor_rotation():
+    rec, truth = generate(
+        FAST,
+        Effects(squareness_rad=100e-6, kinematics="table"),
+        Sensor(eps_c_rad=0.0367),
+        seed=3,
+        motion=Motion(oversample=2),
+    )
+    result, _ = _analyze(rec)
+    assert (
+        abs(result.squareness_rad - truth["squareness_expected_rad"]) <= 3 * result.u_squareness_rad
+    )
+    assert abs(result.eps_c_rad - truth["eps_c_mean_rad"]) <= 3 * result.u_eps_c_rad
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="Y backlash at the block start moves the motion anchor: eps_c",
+)
+def test_known_backlash_at_block_start_and_sensor_rotation():
+    rec, truth = generate(
+        FAST,
+        Effects(squareness_rad=100e-6, lost_motion_y=LostMotion(15e-6)),
+        Sensor(eps_c_rad=0.0367),
+        seed=3,
+        motion=Motion(oversample=2),
+    )
+    result, _ = _analyze(rec)
+    assert abs(result.eps_c_rad - truth["eps_c_mean_rad"]) <= 3 * result.u_eps_c_rad
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="the robust fit's partial rejection of spikes, seen via eps_c",
+)
+def test_known_centred_spikes_with_a_rotated_sensor():
+    dev, us = [], []
+    for seed in range(8):
+        rec, truth = generate(
+            FAST,
+            Effects(squareness_rad=100e-6, spikes=[Spike("y", "centred", 8e-6, 0.015)]),
+            Sensor(eps_c_rad=0.0367),
+            seed=500 + seed,
+            motion=Motion(oversample=2),
+        )
+        result, _ = _analyze(rec)
+        dev.append(result.squareness_rad - truth["squareness_expected_rad"])
+        us.append(result.u_squareness_rad)
+    # the mean of 8 runs against the truth, within 3 of its own standard error
+    assert abs(np.mean(dev)) <= 3 * np.mean(us) / math.sqrt(len(dev))
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="the robust fit takes a quartic straightness's harmonics",
+)
+def test_known_quartic_straightness_at_low_noise():
+    rec, truth = generate(
+        PAPER,
+        Effects(
+            squareness_rad=100e-6,
+            straightness_y={"quartic_m": 30e-6, "length_m": 0.4, "mid_m": 0.05},
+        ),
+        Sensor(eps_c_rad=0.0367, noise_density_m_s2_rthz=0.3 * UG),
+        seed=0,
+        motion=Motion(oversample=1),
+    )
+    result, _ = _analyze(rec)
+    assert (
+        abs(result.squareness_rad - truth["squareness_expected_rad"]) <= 3 * result.u_squareness_rad
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    raises=AssertionError,
+    reason="friction-rung modes near the fast circle's 24 Hz cutoff",
+)
+def test_known_modes_rung_at_reversals_on_a_fast_circle():
+    rec, truth = generate(
+        FAST,
+        Effects(
+            squareness_rad=100e-6,
+            mode_x=Mode(25.0, 0.03, 0.0, 0.03),
+            mode_y=Mode(32.0, 0.03, 0.0, 0.03),
+        ),
+        Sensor(eps_c_rad=0.0367, noise_density_m_s2_rthz=1e-9, resolution_m_s2=0.0),
+        seed=0,
+        motion=Motion(oversample=2),
+    )
+    result, _ = _analyze(rec)
+    # noise-free: the analysis should land within a micro-radian of the truth
+    assert abs(result.squareness_rad - truth["squareness_expected_rad"]) <= 1e-6
