@@ -85,6 +85,14 @@ def clean_cases():
         "paper static tilt 5 mrad": (PAPER, e, {**s, "tilt_x_rad": 5e-3, "tilt_y_rad": -3e-3}, {}),
         "paper gains +1%/-2%": (PAPER, e, {**s, "gain_x": 0.01, "gain_y": -0.02}, {}),
         "fast moving table": (FAST, {**e, "kinematics": "table"}, s, {}),
+        "paper anti-alias 2-pole 62 Hz": (PAPER, e, {**s, "bandwidth_hz": 62.5}, {}),
+        "fast anti-alias 2-pole 30 Hz": (FAST, e, {**s, "bandwidth_hz": 30.0}, {}),
+        "fast 2 runs, start 90 deg": (
+            TestProgram(radius_m=0.025, feed_m_per_s=0.15, runs=2, start_angle_rad=math.pi / 2),
+            e,
+            s,
+            {},
+        ),
     }
 
 
