@@ -496,3 +496,19 @@ def test_a_busy_history_keeps_the_night_says_so_and_stores_it_first_next_time(ri
         stored = [Path(r.recording_path).name for r in h.runs("m1")]
     assert stored[-2:] == ["night-005.mcap", "night-006.mcap"]
     assert not (rig / "data" / "nights-to-store.txt").exists()
+
+
+def test_the_anchored_machine_squareness_comes_with_its_uncertainty_everywhere(rig, capsys):
+    # It used to appear only in the verdict's text, without its uncertainty.
+    config = rig / "monitor.toml"
+    argv = ["baseline", "anchor", "--config", str(config), "--ballbar", "21.5", "--u", "2.0"]
+    assert main(argv) == 0
+    _, record = judge(config, night(rig, 5), capsys)
+    u = math.hypot(2.0, record["u_change_urad"])
+    assert record["machine_squareness_urad"] == pytest.approx(21.5 + record["change_urad"])
+    assert record["u_machine_squareness_urad"] == pytest.approx(u)
+    value = record["machine_squareness_urad"]
+    assert f"machine squareness {value:+.1f} ± {u:.1f} µm/m (k=1)" in record["verdict"]
+    assert main(["history", "--config", str(config)]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert "machine µm/m" in table[0] and f"{value:+7.1f} ± {u:5.1f}" in table[-1]

@@ -83,7 +83,7 @@ def run(args):
         ]
         print(
             f"{'run':>5}  {'recorded':20}  {'state':14}  {'change µm/m':>16}  {'θy−θx µm/m':>11}  "
-            f"{'eps_c °':>8}  note",
+            f"{'eps_c °':>8}  {'machine µm/m':>16}  note",
             file=result_stream(args),
         )
         for n in nights:
@@ -95,7 +95,7 @@ def run(args):
             eps = "" if r.eps_c_rad is None else f"{math.degrees(r.eps_c_rad):8.3f}"
             print(
                 f"{r.id:>5}  {iso(r.recorded_at_ns):20}  {n.state:14}  {change:>16}  {sq:>11}  "
-                f"{eps:>8}  {n.reason}",
+                f"{eps:>8}  {_absolute(assessment, n):>16}  {n.reason}",
                 file=result_stream(args),
             )
             if args.json:
@@ -174,6 +174,18 @@ def _compare(args):
         text += f"; B − A: mean {np.mean(d):+.2f}{sd}, largest {np.max(np.abs(d)):.2f} µm/m"
     print(text, file=result_stream(args))
     return 0
+
+
+def _absolute(assessment, night):
+    """The machine's anchored squareness ± its u, for the table; blank without an anchor."""
+    from imu_square.monitor.verdict import machine_squareness
+    from imu_square.units import URAD
+
+    anchored = machine_squareness(assessment, night)
+    if anchored is None:
+        return ""
+    value, u = anchored
+    return f"{value / URAD:+7.1f}" + ("" if u is None else f" ± {u / URAD:5.1f}")
 
 
 def _cell(value, width):

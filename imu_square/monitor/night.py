@@ -23,7 +23,14 @@ from imu_square.monitor.alerts.send import queue_alert
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS, EvaluationRow, RunRow
 from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
-from imu_square.monitor.verdict import design_for, iso, judge_runs, machine_state, verdict
+from imu_square.monitor.verdict import (
+    design_for,
+    iso,
+    judge_runs,
+    machine_squareness,
+    machine_state,
+    verdict,
+)
 from imu_square.units import MM_PER_MIN, URAD
 
 
@@ -534,8 +541,10 @@ def night_record(assessment, night, line):
         },
         "chart": None if night.chart is None else night.chart.to_json_dict(),
     }
-    if math.isfinite(assessment.anchor_rad) and math.isfinite(night.change_rad):
-        record["machine_squareness_urad"] = (assessment.anchor_rad + night.change_rad) / URAD
+    anchored = machine_squareness(assessment, night)
+    if anchored is not None:
+        record["machine_squareness_urad"] = anchored[0] / URAD
+        record["u_machine_squareness_urad"] = _urad(anchored[1])
     return record
 
 

@@ -503,6 +503,32 @@ def verdict(assessment, night):
     return line
 
 
+def machine_squareness(assessment, night):
+    """The machine's absolute squareness on a night, by the anchored baseline.
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's assessment.
+    night : Night
+        The night.
+
+    Returns
+    -------
+    tuple (float, float or None) or None
+        The anchor's value plus the night's change, and its standard
+        uncertainty (the anchor's and the change's combined; None when the
+        anchor's was not given); None without an anchor or a change. [rad]
+    """
+    if not assessment.anchors or not math.isfinite(night.change_rad):
+        return None
+    anchor = assessment.anchors[-1]
+    u = anchor.u_value_rad
+    return anchor.value_rad + night.change_rad, None if u is None else math.hypot(
+        u, night.u_change_rad
+    )
+
+
 def machine_state(assessment, night):
     """The machine's state on a night: ``alarm`` while an alarm stands, else the night's.
 
@@ -536,9 +562,14 @@ def _line(assessment, night):
         since = f" since the baseline of {iso(base.last_run_at_ns or base.created_at_ns)[:10]}"
     change = f"{night.change_rad / URAD:+.1f} ± {night.u_change_rad / URAD:.1f} µm/m (k=1)"
     absolute = ""
-    if math.isfinite(assessment.anchor_rad) and math.isfinite(night.change_rad):
-        value = (assessment.anchor_rad + night.change_rad) / URAD
-        absolute = f"; machine squareness {value:+.1f} µm/m by the anchored baseline"
+    anchored = machine_squareness(assessment, night)
+    if anchored is not None:
+        value, u = anchored
+        absolute = (
+            f"; machine squareness {value / URAD:+.1f} ± {u / URAD:.1f} µm/m (k=1)"
+            if u is not None
+            else f"; machine squareness {value / URAD:+.1f} µm/m (the anchor's u not given)"
+        ) + " by the anchored baseline"
     if night.state == "ok":
         return f"squareness unchanged ({change}{since}){absolute}"
     if night.state == "warning":

@@ -15,7 +15,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from imu_square import __version__
-from imu_square.monitor.verdict import iso, verdict
+from imu_square.monitor.verdict import iso, machine_squareness, verdict
 from imu_square.units import URAD
 
 SECTIONS = ("verdict", "trend", "last-run", "sensor", "baseline", "alarm-design", "nights")
@@ -163,18 +163,24 @@ def _design_html(design):
 def _nights_html(assessment, last=30):
     head = (
         "<tr><th class='text'>recorded</th><th class='text'>state</th><th>change µm/m</th>"
-        "<th>u µm/m</th><th>θy − θx µm/m</th><th>eps_c °</th><th class='text'>note</th></tr>"
+        "<th>u µm/m</th><th>θy − θx µm/m</th><th>eps_c °</th><th>machine µm/m</th>"
+        "<th class='text'>note</th></tr>"
     )
     rows = []
     for n in reversed(assessment.nights[-last:]):
         r = n.run
         eps = None if r.eps_c_rad is None else math.degrees(r.eps_c_rad)
         sq = None if r.squareness_rad is None else r.squareness_rad / URAD
+        anchored = machine_squareness(assessment, n)
+        absolute = "–"
+        if anchored is not None:
+            value, u = anchored
+            absolute = f"{value / URAD:+.1f}" + ("" if u is None else f" ± {u / URAD:.1f}")
         rows.append(
             f"<tr><td class='text'>{_e(iso(r.recorded_at_ns))}</td>"
             f"<td class='text {_e(n.state)}'>{_e(n.state)}</td>"
             f"<td>{_num(n.change_rad / URAD)}</td><td>{_num(n.u_change_rad / URAD, '.1f')}</td>"
-            f"<td>{_num(sq)}</td><td>{_num(eps, '.3f')}</td>"
+            f"<td>{_num(sq)}</td><td>{_num(eps, '.3f')}</td><td>{_e(absolute)}</td>"
             f"<td class='text'>{_e(n.reason)}</td></tr>"
         )
     return f'<div class="table"><table>{head}{"".join(rows)}</table></div>'
