@@ -5,6 +5,8 @@ names the file or parameter, what was allowed and what was received. The CLI
 prints such an error as one line on stderr and exits non-zero.
 """
 
+from contextlib import contextmanager
+
 
 class ImuSquareError(Exception):
     """Base class of every error a user can cause."""
@@ -60,3 +62,29 @@ class OutputWriteError(OutputError):
 
 class ImuSquareWarning(UserWarning):
     """A recoverable oddity: the result is still produced, but say so."""
+
+
+@contextmanager
+def step(name, error=ImuSquareError):
+    """Run one step of a command: an unexpected numerical failure in it is one line naming it.
+
+    A library's ``OverflowError``, ``ZeroDivisionError``, ``ValueError`` or
+    ``LinAlgError`` out of a computation (an extreme input no check foresaw)
+    must not end a nightly job in a traceback; the traceback stays in the
+    debug log (``-v``).
+
+    Parameters
+    ----------
+    name : str
+        The step, e.g. ``"designing the alarm charts"``.
+    error : type
+        The :class:`ImuSquareError` subclass to raise.
+    """
+    try:
+        yield
+    except (ArithmeticError, ValueError) as exc:
+        from imu_square.log import logger
+
+        logger.debug("%s failed", name, exc_info=True)
+        text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise error(f"{name} failed: {type(exc).__name__}: {text}") from exc

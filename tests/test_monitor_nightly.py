@@ -512,3 +512,38 @@ def test_the_anchored_machine_squareness_comes_with_its_uncertainty_everywhere(r
     assert main(["history", "--config", str(config)]) == 0
     table = capsys.readouterr().out.splitlines()
     assert "machine µm/m" in table[0] and f"{value:+7.1f} ± {u:5.1f}" in table[-1]
+
+
+def test_an_unexpected_numerical_failure_is_one_line_naming_its_step(rig, capsys, monkeypatch):
+    # scipy's nct overflowed in baseline set as a bare library traceback; any such failure
+    # in a step is one line that names it, and a failed design stores no baseline.
+    from imu_square.monitor.stats import alarms
+    from imu_square.pipeline import squareness
+
+    config = rig / "monitor.toml"
+    with open_history(rig / "history.db") as h:
+        before = h.current_baseline("m1").id
+
+    def overflow(*args, **kwargs):
+        raise OverflowError("Result of tgamma is too large to represent")
+
+    monkeypatch.setattr(alarms, "design_alarms", overflow)
+    runs = [str(night(rig, d)) for d in (5, 6, 7)]
+    assert main(["baseline", "set", "--config", str(config), *runs]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.endswith(
+        "error: designing the alarm charts failed: OverflowError: Result of tgamma is too "
+        "large to represent"
+    )
+    with open_history(rig / "history.db") as h:
+        assert h.current_baseline("m1").id == before
+
+    def broken(*args, **kwargs):
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(squareness, "analyze", broken)
+    code, record = judge(config, night(rig, 8), capsys)
+    assert record["state"] == "invalid" and code == EXIT_CODES["invalid"]
+    assert record["invalid_reason"] == (
+        "the analysis failed: ValueError: array must not contain infs or NaNs"
+    )

@@ -10,11 +10,11 @@ ballbar's value, or the two face-diagonal lengths of an ISO 230-6 laser test.
 
 import math
 
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, MonitorError, step
 from imu_square.monitor.history.rows import AnchorRow, BaselineRow
-from imu_square.monitor.night import recording_row, stored_design
+from imu_square.monitor.night import recording_row
 from imu_square.monitor.stats.baseline import BaselineError, compute_baseline
-from imu_square.monitor.verdict import run_value
+from imu_square.monitor.verdict import design_for, run_value
 from imu_square.units import MM, URAD
 
 # A machine tool squareness beyond 1 mm/m is a unit mistake, not a machine. [µm/m]
@@ -100,6 +100,9 @@ def set_baseline(config, history, runs, note=""):
     if len(set(keys)) != len(keys):
         raise BaselineError("the same recording is given twice: a baseline needs distinct runs")
     stats = compute_baseline([run_value(r) for r in runs])  # refuses before storing anything
+    # designed before anything is stored: a design that fails leaves the history as it was
+    with step("designing the alarm charts", MonitorError):
+        design = design_for(stats.eps_c_rad, stats.u_squareness_rad, runs, config.alarms)
     with history.transaction():
         ids = tuple(r.id if r.id is not None else history.add_run(r)[0] for r in runs)
         baseline_id = history.add_baseline(
@@ -113,9 +116,9 @@ def set_baseline(config, history, runs, note=""):
                 u_eps_c_rad=stats.u_eps_c_rad,
                 dof=float(stats.dof),
                 note=note,
+                alarm_design=design.to_json_dict(),
             )
         )
-    stored_design(history, history.baseline(baseline_id), config.alarms)
     return history.baseline(baseline_id)
 
 

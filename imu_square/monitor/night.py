@@ -15,7 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from imu_square import __version__
-from imu_square.errors import AnalysisError, HistoryError, ImuSquareError, RecordingError
+from imu_square.errors import (
+    AnalysisError,
+    HistoryError,
+    ImuSquareError,
+    MonitorError,
+    RecordingError,
+    step,
+)
 from imu_square.io.times import is_date
 from imu_square.json_values import json_safe
 from imu_square.log import logger
@@ -209,7 +216,8 @@ def analyse_recording(config, path, program=None, keep_unreadable=True):
     if program is not None and recording.program is not None and recording.program != program:
         return recording, None, program_mismatch(recording.program, program), notes
     try:
-        result = analyze(recording, config.analysis.options(), program=program)
+        with step("the analysis", AnalysisError):
+            result = analyze(recording, config.analysis.options(), program=program)
     except AnalysisError as exc:
         return recording, None, _about_the_run(exc, path), notes
     return recording, result, None, notes
@@ -286,7 +294,10 @@ def stored_design(history, baseline_row, settings):
     if baseline_row.alarm_design:
         return AlarmDesign.from_json_dict(baseline_row.alarm_design)
     runs = [history.run(i) for i in baseline_row.run_ids]
-    design = design_for(baseline_row, runs, settings)
+    with step("designing the alarm charts", MonitorError):
+        design = design_for(
+            baseline_row.eps_c_rad, baseline_row.u_squareness_mean_rad, runs, settings
+        )
     history.set_alarm_design(baseline_row.id, design.to_json_dict())
     return design
 

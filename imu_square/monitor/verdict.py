@@ -191,13 +191,15 @@ class Assessment:
         return next((n for n in self.nights if n.run.id == run_id), None)
 
 
-def design_for(baseline_row, runs, settings):
+def design_for(eps_c_rad, u_baseline_rad, runs, settings):
     """The alarm charts' design for a baseline.
 
     Parameters
     ----------
-    baseline_row : BaselineRow
-        The baseline.
+    eps_c_rad : float
+        The baseline's sensor rotation. [rad]
+    u_baseline_rad : float
+        The baseline's standard uncertainty. [rad]
     runs : sequence of RunRow
         Its runs.
     settings : AlarmSettings
@@ -209,12 +211,12 @@ def design_for(baseline_row, runs, settings):
     """
     from imu_square.monitor.stats.alarms import design_alarms
 
-    c = abs(math.cos(2 * baseline_row.eps_c_rad))
+    c = abs(math.cos(2 * eps_c_rad))
     u = np.array([r.u_squareness_rad for r in runs]) / c
     sigma = float(np.median(u))
     dofs = [r.dof for r in runs if r.dof]
     nu = float(np.median(dofs)) if dofs else None
-    ratio = min(baseline_row.u_squareness_mean_rad / c / sigma, 2.0)
+    ratio = min(u_baseline_rad / c / sigma, 2.0)
     return design_alarms(
         settings.false_alarm_nights,
         sigma,
