@@ -1,0 +1,11 @@
+"""
+A test planned for a fast machine
+=================================
+
+Placeholder.
+"""
+
+import matplotlib.pyplot as plt
+
+plt.plot([0, 1], [0, 1])
+print("hello")
