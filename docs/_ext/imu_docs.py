@@ -295,8 +295,12 @@ class CommandOutput(Directive):
         env = self.state.document.settings.env
         command = " ".join(self.arguments[0].split())
         argv = shlex.split(command)
+        bindir = Path(sys.executable).parent
         if argv[0] == "imu-square":
-            argv = [sys.executable, "-m", "imu_square.cli", *argv[1:]]
+            # the installed command, as a shop runs it (init writes its path into the units)
+            script = bindir / "imu-square"
+            head = [str(script)] if script.exists() else [sys.executable, "-m", "imu_square.cli"]
+            argv = [*head, *argv[1:]]
         expected = self.options.get("returncode", 0)
         done = subprocess.run(
             argv,
@@ -304,7 +308,11 @@ class CommandOutput(Directive):
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL if "stdout-only" in self.options else subprocess.STDOUT,
             text=True,
-            env={**os.environ, "COLUMNS": "100"},
+            env={
+                **os.environ,
+                "COLUMNS": "100",
+                "PATH": f"{bindir}{os.pathsep}{os.environ['PATH']}",
+            },
             timeout=600,
         )
         if done.returncode != expected:

@@ -1,0 +1,8 @@
+"""
+ballbar_side_by_side
+====================
+
+Placeholder.
+"""
+
+print("placeholder")

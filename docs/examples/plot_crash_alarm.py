@@ -1,0 +1,8 @@
+"""
+crash_alarm
+===========
+
+Placeholder.
+"""
+
+print("placeholder")

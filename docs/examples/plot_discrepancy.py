@@ -1,0 +1,8 @@
+"""
+discrepancy
+===========
+
+Placeholder.
+"""
+
+print("placeholder")

@@ -1,0 +1,8 @@
+"""
+fast_machine_plan
+=================
+
+Placeholder.
+"""
+
+print("placeholder")

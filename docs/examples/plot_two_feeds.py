@@ -1,0 +1,8 @@
+"""
+two_feeds
+=========
+
+Placeholder.
+"""
+
+print("placeholder")
