@@ -200,17 +200,35 @@ def _show(default):
     return f"``{default}``"
 
 
-def _table(header, rows, state):
-    """A docutils table from text rows (inline reST markup parsed)."""
-    from docutils.statemachine import StringList
+def _cell(text):
+    """A table cell's paragraph: ````literal```` spans as code, the rest as text."""
+    para = nodes.paragraph()
+    for i, part in enumerate(text.split("``")):
+        if part:
+            para += nodes.literal(part, part) if i % 2 else nodes.Text(part)
+    return para
 
-    lines = [".. list-table::", "   :header-rows: 1", "   :widths: 25 50 25", ""]
-    for row in (header, *rows):
-        lines.append(f"   * - {row[0]}")
-        lines += [f"     - {cell or ' '}" for cell in row[1:]]
-    node = nodes.container()
-    state.nested_parse(StringList(lines), 0, node)
-    return node.children
+
+def _table(header, rows, widths=(25, 50, 25)):
+    """A docutils table from text rows; built as nodes, so it renders in reST and MyST pages."""
+    group = nodes.tgroup(cols=len(widths))
+    group += [nodes.colspec(colwidth=w) for w in widths]
+
+    def row(cells):
+        out = nodes.row()
+        for cell in cells:
+            entry = nodes.entry()
+            entry += _cell(cell or "")
+            out += entry
+        return out
+
+    head, body = nodes.thead(), nodes.tbody()
+    head += row(header)
+    body += [row(r) for r in rows]
+    group += [head, body]
+    table = nodes.table()
+    table += group
+    return [table]
 
 
 class FileFields(Directive):
@@ -224,7 +242,7 @@ class FileFields(Directive):
         for label, rows in file_tables(kind).items():
             section = nodes.rubric(text=label)
             fields = [(f"``{field}``", what, default) for field, what, default in rows]
-            out += [section, *_table(("field", "allowed", "default"), fields, self.state)]
+            out += [section, *_table(("field", "allowed", "default"), fields)]
         return out
 
 
