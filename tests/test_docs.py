@@ -307,3 +307,15 @@ def test_the_built_pages_load_in_a_real_browser(site, tmp_path, page, words):
         assert int(marks["images"]) >= 1, marks  # the example's figure
     for word in words:
         assert word in dom, word
+
+
+def test_the_machine_file_of_the_compare_example_is_chapman_machine_7():
+    # The user guide's compare example runs on it; it must stay the machine the
+    # reference tests check (tests/test_compare.py builds it in code).
+    from imu_square.simulate import data_path, read_machine
+    from imu_square.simulate.geometry import chapman_machine
+
+    shipped = read_machine(data_path("machine_chapman7_yaw.toml")).geometry
+    expected = chapman_machine(7, yaw=True)
+    for field, value in vars(expected).items():
+        assert getattr(shipped, field) == pytest.approx(value, rel=1e-12, abs=1e-15), field
