@@ -89,11 +89,14 @@ def monitor_fields():
 # --- the README ----------------------------------------------------------------------------
 
 
-def _readme_commands():
-    """Every ``imu-square ...`` command in the README's code blocks, continuations joined."""
-    out, pending = [], ""
-    for line in README.read_text(encoding="utf-8").splitlines():
-        if not line.startswith("    "):
+def _example_commands(path):
+    """Every ``imu-square ...`` command in a page's code blocks, continuations joined."""
+    out, pending, fence = [], "", False
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.startswith("```"):
+            fence, pending = not fence and not line.startswith("```{"), ""
+            continue
+        if not (fence or line.startswith("    ")):
             pending = ""
             continue
         code = re.sub(r"\s+#.*$", "", line.strip())
@@ -123,7 +126,7 @@ def test_the_readme_lists_every_command_and_each_example_parses():
     text = README.read_text(encoding="utf-8")
     listed = set(re.findall(r"^\| `([a-z-]+)` \|", text, flags=re.MULTILINE))
     assert listed == set(commands()), listed ^ set(commands())
-    examples = _readme_commands()
+    examples = _example_commands(README)
     assert len(examples) >= 5, examples
     parser = build_parser(full=True)
     for example in examples:
@@ -131,6 +134,27 @@ def test_the_readme_lists_every_command_and_each_example_parses():
             parser.parse_args(shlex.split(example)[1:])
         except SystemExit:
             pytest.fail(f"the README's command does not parse: {example}")
+
+
+def _is_synopsis(command):
+    """A usage line (``[--json]``, ``a|b``, ``...``, ``RUN.mcap``-style placeholders)."""
+    return bool(re.search(r"[\[\]|]|\.\.\.|\b[A-Z][A-Z0-9_]*[A-Z0-9]\b", command))
+
+
+def test_the_user_guides_example_commands_parse():
+    parser = build_parser(full=True)
+    examples = [
+        (page.name, command)
+        for page in sorted((ROOT / "docs" / "user-guide").glob("*.md"))
+        for command in _example_commands(page)
+        if not _is_synopsis(command)
+    ]
+    assert len(examples) >= 15, examples
+    for page, example in examples:
+        try:
+            parser.parse_args(shlex.split(example)[1:])
+        except SystemExit:
+            pytest.fail(f"{page}: the example command does not parse: {example}")
 
 
 def test_the_readme_verdict_has_the_form_the_monitor_prints():
