@@ -28,6 +28,7 @@ from imu_square.io.mcap import write_mcap
 from imu_square.monitor.baseline_setup import set_baseline
 from imu_square.monitor.config import read_monitor
 from imu_square.monitor.night import judge_recording, recording_row
+from imu_square.monitor.report.figures import plot_trend
 from imu_square.simulate import data_path, read_sensor, simulate_run
 from imu_square.simulate.machine import machine_from_mapping
 
@@ -142,10 +143,20 @@ ax.legend(loc="upper left", fontsize=8)
 fig.tight_layout()
 
 # %%
-# ``imu-square history --config monitor.toml --plot trend.png`` draws the
-# monitor's own trend chart, with the Shewhart limits and the EWMA and CUSUM
-# statistics that raised the alarm; ``imu-square report`` puts it into an
-# HTML page with the verdict and the latest nights.
+# The monitor's own trend chart
+# -----------------------------
+# ``imu-square history --config monitor.toml --plot trend.png`` draws it, and
+# ``imu-square report`` puts it into an HTML page with the verdict and the
+# latest nights: each night's change with the Shewhart warning and alarm
+# limits, and below, the EWMA and CUSUM statistics, whose climb raised the
+# alarm. Here it is drawn from the last night's assessment.
+
+chart = folder / "trend.png"
+plot_trend(outcome.assessment, chart)
+fig, ax = plt.subplots(figsize=(11, 7.5))
+ax.imshow(plt.imread(chart))
+ax.set_axis_off()
+fig.tight_layout()
 
 # %%
 # The example cleans up after itself.
