@@ -189,13 +189,21 @@ def _honest_cases(tmp_path):
     spikes = MachineModel(spike_x_m_s2=0.02, spike_y_m_s2=-0.02)
     yield "clean", record(tmp_path, seed=11, name="clean.mcap")[0], ()
     yield "servo named", record(tmp_path, machine=LAG, seed=2, name="lag.mcap")[0], ()
-    yield "servo not allowed", record(tmp_path, machine=LAG, seed=6, name="lag6.mcap")[0], (
-        "--effects-allowed",
-        "backlash",
+    yield (
+        "servo not allowed",
+        record(tmp_path, machine=LAG, seed=6, name="lag6.mcap")[0],
+        (
+            "--effects-allowed",
+            "backlash",
+        ),
     )
-    yield "spikes not allowed", record(tmp_path, machine=spikes, seed=3, name="sp.mcap")[0], (
-        "--effects-allowed",
-        "servo_mismatch",
+    yield (
+        "spikes not allowed",
+        record(tmp_path, machine=spikes, seed=3, name="sp.mcap")[0],
+        (
+            "--effects-allowed",
+            "servo_mismatch",
+        ),
     )
 
 
@@ -203,7 +211,7 @@ def test_the_first_line_never_says_explained_while_a_gap_is_left(tmp_path, capsy
     """The headline rule (issue 22 section 2); the benchmarks check it on every case."""
     seen = set()
     for name, path, extra in _honest_cases(tmp_path):
-        code, out, err = run_cli(capsys, path, "--json", "--no-suggest", *extra)
+        _, out, err = run_cli(capsys, path, "--json", "--no-suggest", *extra)
         doc = json.loads(out)
         assert headline_is_honest(doc), (name, doc["headline"])
         assert err.splitlines()[1] == doc["headline"]

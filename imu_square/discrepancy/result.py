@@ -240,7 +240,7 @@ class DiscrepancyResult:
         }
 
     def summary(self):
-        """Human-readable lines: the headline, noise floor, steps, gaps per view, where a gap is left."""
+        """Human-readable lines: headline, noise floor, steps, gaps per view, gaps left."""
         d = np.asarray(self.noise["density_m_s2_rthz"]) / UG
         lines = [
             self.headline(),
@@ -250,7 +250,7 @@ class DiscrepancyResult:
                 if max(self.noise["flicker_corner_hz"]) > 0
                 else ""
             )
-            + f"; significance {self.significance:g} per step"
+            + f"; significance {self.significance:g} per step",
         ]
         base = ", ".join(p.text() for p in self.base if not p.name.startswith("anchor"))
         lines.append(f"base model: {base}")
