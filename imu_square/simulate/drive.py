@@ -10,8 +10,11 @@ direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
   is centred on the reversal, so half of it happens before the commanded
   reversal (acausal, a smooth stand-in for the real take-up, which starts
   at the reversal); the reversal times in the truth are its centre;
-- reversal spike: following-error bump ``-d h u^2 exp(-u)``, ``u = t'/tau_s``,
+- reversal spike: following-error bump ``-d h u^2 exp(-u)``, ``u = t'/tau_s - o``,
   whose acceleration starts at the peak ``2 h / tau_s^2`` and has zero area;
+  ``h`` is signed (negative: inward, an over-set friction compensation) and the
+  onset ``o`` (in ``tau_s``) places it after the reversal (0), centred on it
+  (-2: the position peak on the reversal) or leading it (below -2);
 - structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which
   starts with zero position and velocity and acceleration ``D omega_d^2``.
 """
@@ -67,7 +70,7 @@ def add_backlash(p, t, times, directions, initial, lost_m, take_up_s):
     p[0] += -0.5 * lost_m * state
 
 
-def add_spikes(p, t, times, directions, peak_m_s2, tau_s):
+def add_spikes(p, t, times, directions, peak_m_s2, tau_s, onset=0.0):
     """Add friction following-error bumps after each reversal, in place.
 
     Parameters
@@ -79,14 +82,17 @@ def add_spikes(p, t, times, directions, peak_m_s2, tau_s):
     times, directions : ndarray
         Reversal times [s] and the direction after each.
     peak_m_s2 : float
-        Peak acceleration ``2 h / tau_s^2`` of the bump. [m/s^2]
+        Peak acceleration ``2 h / tau_s^2`` of the bump; negative inward. [m/s^2]
     tau_s : float
         Time constant of the bump. [s]
+    onset : float
+        Start of the bump after the reversal, in units of ``tau_s`` (negative: before).
     """
     if peak_m_s2 == 0:
         return
     h = 0.5 * peak_m_s2 * tau_s**2
     for tk, dk in zip(times, directions, strict=True):
+        tk = tk + onset * tau_s
         sl = _window(t, tk, tk + _SPIKE_WINDOW * tau_s)
         u = (t[sl] - tk) / tau_s
         e = -dk * h * np.exp(-u)

@@ -88,6 +88,7 @@ def machine_to_toml(machine, header=""):
                 "peak_x_m_s2": m.spike_x_m_s2,
                 "peak_y_m_s2": m.spike_y_m_s2,
                 "tau_ms": m.spike_tau_s / MS,
+                "onset_tau": m.spike_onset,
             },
         ),
         (
