@@ -11,7 +11,8 @@ sensor rotation within +-4 deg); each case hides one effect:
   allows one (spikes and backlash: either sign per axis; the gravity
   coupling's four terms all at +-100 urad/m times that factor); its shape
   drawn over a realistic range (spike time constant 10-40 ms, starting after,
-  centred on or leading the reversal; backlash take-up 2-10 ms, vibration
+  centred on or leading the reversal; backlash take-up 2-10 ms, centred on
+  the reversal to starting at it, vibration
   20-150 Hz and damping 0.02-0.1, warm-up time constant 100-1000 s,
   straightness with or without each associated yaw);
 - its size: the detection limit times a ratio drawn log-uniformly in
@@ -76,6 +77,7 @@ _SHAPES = {
     # after the reversal, centred on it, or leading it
     ("reversal_spikes", "onset_tau"): lambda r: float(r.choice([0.0, -2.0, -4.0])),
     ("backlash", "take_up_ms"): lambda r: r.uniform(2.0, 10.0),
+    ("backlash", "onset"): lambda r: r.uniform(0.0, 3.0),  # centred on ... starting at the reversal
     ("structural_vibration", "frequency_hz"): lambda r: math.exp(
         r.uniform(math.log(20), math.log(150))
     ),

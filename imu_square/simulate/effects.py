@@ -218,6 +218,19 @@ EFFECT_PARAMETERS = {
             "backlash_take_up_s",
             scan=(2.0, 5.0, 10.0, 20.0),
         ),
+        _p(
+            "backlash",
+            "onset",
+            "",
+            1.0,
+            -3.0,
+            6.0,
+            0.0,
+            SHAPE,
+            "machine",
+            "backlash_onset",
+            scan=(0.0, 2.0),  # centred on the reversal; starting at it
+        ),
     ),
     "scale_mismatch": (
         _p(

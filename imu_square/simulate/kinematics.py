@@ -112,7 +112,9 @@ def carriage_motion(timeline, machine, t):
         if lost or spike or vibration:
             times, directions, initial = timeline.reversals(axis)
             times = times + reversal_delays(times, delays)
-            add_backlash(p, t, times, directions, initial, lost, m.backlash_take_up_s)
+            add_backlash(
+                p, t, times, directions, initial, lost, m.backlash_take_up_s, m.backlash_onset
+            )
             add_spikes(p, t, times, directions, spike, m.spike_tau_s, m.spike_onset)
             add_vibration(p, t, times, directions, vibration, m.vibration_hz, m.vibration_damping)
         paths.append(p)

@@ -35,6 +35,7 @@ A machine file (all sections optional; absent = ideal)::
     x_um = 0.0                    # negative: over-compensated (the table is thrown ahead)
     y_um = 0.0
     take_up_ms = 5.0
+    onset = 0.0                   # centre of the take-up after the reversal, in take-up times
 
     [reversal_spikes]
     peak_x_m_s2 = 0.0             # peak of the acceleration bump (negative: inward)
@@ -91,6 +92,9 @@ class MachineModel:
         exceeds it (the table is thrown ahead at a reversal). [m]
     backlash_take_up_s : float
         Time constant of the take-up. [s]
+    backlash_onset : float
+        Centre of the take-up after the reversal, in units of
+        ``backlash_take_up_s`` (0: centred on it; 2 or more: it starts there).
     spike_x_m_s2, spike_y_m_s2 : float
         Peak acceleration of the friction bump at a reversal; positive outward
         (the axis lags its new direction), negative inward (an over-set
@@ -122,6 +126,7 @@ class MachineModel:
     backlash_x_m: float = 0.0
     backlash_y_m: float = 0.0
     backlash_take_up_s: float = 0.005
+    backlash_onset: float = 0.0
     spike_x_m_s2: float = 0.0
     spike_y_m_s2: float = 0.0
     spike_tau_s: float = 0.02
@@ -167,6 +172,7 @@ class MachineModel:
                 "backlash_x_m": self.backlash_x_m,
                 "backlash_y_m": self.backlash_y_m,
                 "take_up_s": self.backlash_take_up_s,
+                "onset": self.backlash_onset,
             }
         if self.spike_x_m_s2 or self.spike_y_m_s2:
             out["reversal_spikes"] = {
@@ -214,7 +220,7 @@ _LAYOUT = {
         "yaw_y": False,
     },
     "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0, "model": "pure_lag"},
-    "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0},
+    "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0, "onset": 0.0},
     "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0, "onset_tau": 0.0},
     "structural_vibration": {
         "accel_x_m_s2": 0.0,
@@ -306,6 +312,7 @@ def machine_from_mapping(doc, source="<machine>"):
         backlash_x_m=backlash.number("x_um", -1e3, 1e3) * UM,
         backlash_y_m=backlash.number("y_um", -1e3, 1e3) * UM,
         backlash_take_up_s=backlash.number("take_up_ms", 0.0, 1e3, lo_open=True) * MS,
+        backlash_onset=backlash.number("onset", -10.0, 10.0),
         spike_x_m_s2=spikes.number("peak_x_m_s2", -100.0, 100.0),
         spike_y_m_s2=spikes.number("peak_y_m_s2", -100.0, 100.0),
         spike_tau_s=spikes.number("tau_ms", 0.0, 1e3, lo_open=True) * MS,

@@ -66,6 +66,7 @@ def axis_parameters(machine, axis):
     return (
         *own,
         m.backlash_take_up_s,
+        m.backlash_onset,
         m.spike_tau_s,
         m.spike_onset,
         m.vibration_hz,
@@ -92,14 +93,14 @@ def axis_motion(timeline, machine, t_s, axis):
     list of 3 ndarray
         [m, m/s, m/s^2]
     """
-    tau, lost, spike, vibration, take_up, spike_tau, onset, hz, damping = axis_parameters(
-        machine, axis
+    tau, lost, spike, vibration, take_up, take_up_onset, spike_tau, onset, hz, damping = (
+        axis_parameters(machine, axis)
     )
     p = list(timeline.axis_path(t_s - tau, axis))
     if lost or spike or vibration:
         times, directions, initial = timeline.reversals(axis)
         times = times + tau
-        add_backlash(p, t_s, times, directions, initial, lost, take_up)
+        add_backlash(p, t_s, times, directions, initial, lost, take_up, take_up_onset)
         add_spikes(p, t_s, times, directions, spike, spike_tau, onset)
         add_vibration(p, t_s, times, directions, vibration, hz, damping)
     return p

@@ -80,6 +80,7 @@ def machine_to_toml(machine, header=""):
                 "x_um": m.backlash_x_m / UM,
                 "y_um": m.backlash_y_m / UM,
                 "take_up_ms": m.backlash_take_up_s / MS,
+                "onset": m.backlash_onset,
             },
         ),
         (
