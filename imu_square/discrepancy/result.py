@@ -44,6 +44,8 @@ class FittedValue:
 
     def text(self):
         """``name = value ± u unit``."""
+        if self.unit == "flag":
+            return f"{self.name}: {'yes' if self.value >= 0.5 else 'no'} (the scan's choice)"
         if not self.identifiable:
             return f"{self.name} = {self.value:.4g} {self.unit} (not identifiable here, held)"
         return f"{self.name} = {self.value:.4g} ± {self.u_value:.2g} {self.unit}".rstrip()

@@ -158,6 +158,12 @@ def _step_values(step, state):
     out += [
         FittedValue(p.name, p.get(state), math.nan, p.unit, identifiable=False) for p in step.fixed
     ]
+    # a choice of two (first-order servo, associated yaw): the scan's pick, held in the fit
+    out += [
+        FittedValue(p.name, p.get(state), math.nan, p.unit)
+        for p in effect_model_parameters(step.effect)
+        if p.declared.is_flag
+    ]
     return tuple(out)
 
 

@@ -96,7 +96,9 @@ class EffectParameter:
             a, b = self.path.split("-")
             first = _get(obj, a)
             return 0.0 if first is None else float(first) - float(_get(obj, b))
-        return float(_get(obj, self.path))
+        value = _get(obj, self.path)
+        choices = _FLAGS.get(self.path.rpartition(".")[2])
+        return float(choices.index(value)) if choices else float(value)
 
     def set(self, machine, sensor, value_si):
         """A new (machine, sensor) with this parameter at ``value_si``."""
@@ -124,12 +126,20 @@ def _get(obj, path):
     return _get(value, rest) if rest else value
 
 
+# Fields that hold a choice of two: a flag's 0 and 1 in the file's terms.
+_FLAGS = {
+    "yaw_x": (False, True),
+    "yaw_y": (False, True),
+    "servo_model": ("pure_lag", "first_order"),
+}
+
+
 def _set(obj, path, value):
     name, index, rest = _split(path)
     if rest:
         return replace(obj, **{name: _set(getattr(obj, name), rest, value)})
-    if name in ("yaw_x", "yaw_y"):
-        value = bool(value >= 0.5)
+    if name in _FLAGS:
+        value = _FLAGS[name][int(value >= 0.5)]
     if index is not None:
         items = list(getattr(obj, name))
         items[index] = value
@@ -149,6 +159,20 @@ EFFECT_PARAMETERS = {
     "servo_mismatch": (
         _p("servo_mismatch", "tau_x_ms", "ms", MS, 0.0, 20.0, 2.0, SIZE, "machine", "tau_x_s"),
         _p("servo_mismatch", "tau_y_ms", "ms", MS, 0.0, 20.0, 3.0, SIZE, "machine", "tau_y_s"),
+        # a pure lag, or a first-order loop 1 / (1 + s tau), whose circle is also smaller
+        _p(
+            "servo_mismatch",
+            "first_order",
+            "flag",
+            1.0,
+            0.0,
+            1.0,
+            0.0,
+            SHAPE,
+            "machine",
+            "servo_model",
+            scan=(0.0, 1.0),
+        ),
     ),
     "reversal_spikes": (
         _p(
@@ -282,6 +306,19 @@ EFFECT_PARAMETERS = {
             SIZE,
             "machine",
             "geometry.straightness_y_m",
+        ),
+        # Chapman's machine 7: a quartic part Q (2 x / L)^4 of the X axis's form
+        _p(
+            "straightness_yaw",
+            "x_quartic_um",
+            "µm",
+            UM,
+            -1000.0,
+            1000.0,
+            0.0,
+            SIZE,
+            "machine",
+            "geometry.straightness_x_quartic_m",
         ),
         _p(
             "straightness_yaw",

@@ -57,7 +57,7 @@ def servo_response(omega_rad_s, tau_s, model):
     return 1.0 / math.sqrt(1.0 + x * x), math.atan(x) / omega_rad_s
 
 
-def _servo_path(timeline, t, axis, tau, model):
+def servo_path(timeline, t, axis, tau, model):
     """Commanded axis path through the servo, and the delay of each block's span."""
     if model == "pure_lag":
         return list(timeline.axis_path(t - tau, axis)), [(0.0, tau)]
@@ -108,7 +108,7 @@ def carriage_motion(timeline, machine, t):
     )
     paths = []
     for axis, (tau, lost, spike, vibration) in enumerate(per_axis):
-        p, delays = _servo_path(timeline, t, axis, tau, m.servo_model)
+        p, delays = servo_path(timeline, t, axis, tau, m.servo_model)
         if lost or spike or vibration:
             times, directions, initial = timeline.reversals(axis)
             times = times + reversal_delays(times, delays)
