@@ -13,7 +13,8 @@ sensor rotation within +-4 deg); each case hides one effect:
   drawn over a realistic range (spike time constant 10-40 ms, starting after,
   centred on or leading the reversal; backlash take-up 2-10 ms, centred on
   the reversal to starting at it, vibration
-  20-150 Hz and damping 0.02-0.1, warm-up time constant 100-1000 s,
+  20-150 Hz and damping 0.02-0.1, warm-up time constant 100-1000 s, a pure
+  lag or a first-order servo,
   straightness with or without each associated yaw);
 - its size: the detection limit times a ratio drawn log-uniformly in
   [0.5, 30], capped by the physical range. The detection limit is the size
@@ -85,6 +86,7 @@ _SHAPES = {
     ("sensor_thermal_drift", "tau_warm_s"): lambda r: math.exp(
         r.uniform(math.log(100), math.log(1000))
     ),
+    ("servo_mismatch", "first_order"): lambda r: float(r.integers(2)),  # or a pure lag
     ("straightness_yaw", "yaw_x"): lambda r: float(r.integers(2)),
     ("straightness_yaw", "yaw_y"): lambda r: float(r.integers(2)),
 }
