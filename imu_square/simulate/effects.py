@@ -201,19 +201,6 @@ EFFECT_PARAMETERS = {
         ),
         _p(
             "reversal_spikes",
-            "tau_ms",
-            "ms",
-            MS,
-            3.0,
-            150.0,
-            20.0,
-            SHAPE,
-            "machine",
-            "spike_tau_s",
-            scan=(5.0, 10.0, 20.0, 40.0, 80.0),
-        ),
-        _p(
-            "reversal_spikes",
             "onset_tau",
             "",
             1.0,
@@ -223,7 +210,22 @@ EFFECT_PARAMETERS = {
             SHAPE,
             "machine",
             "spike_onset",
-            scan=(0.0, -2.0, -4.0),  # after the reversal, centred on it, leading it
+            # after the reversal, centred on it, leading it; declared before the width,
+            # so that a coarse scan of the product grid steps through widths
+            scan=(0.0, -2.0, -4.0),
+        ),
+        _p(
+            "reversal_spikes",
+            "tau_ms",
+            "ms",
+            MS,
+            3.0,
+            150.0,
+            20.0,
+            SHAPE,
+            "machine",
+            "spike_tau_s",
+            scan=(5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0, 56.0, 80.0),
         ),
     ),
     "backlash": (
