@@ -154,3 +154,12 @@ def test_sensed_signal_is_simulate_runs_reading_sample_for_sample():
     # the recording holds float32: equal to its rounding
     assert_allclose(recording.accel, mine, rtol=0, atol=2e-6)
     assert np.max(np.abs(recording.accel[:, :2] - mine[:, :2])) < 1e-6
+
+
+def test_chapman_s_machine_7_written_keeps_its_quartic_form():
+    from imu_square.simulate.geometry import chapman_machine
+    from imu_square.simulate.machine import MachineModel
+
+    machine = MachineModel(geometry=chapman_machine(7, yaw=True))
+    assert machine.geometry.straightness_x_quartic_m != 0
+    assert machine_from_mapping(tomllib.loads(machine_to_toml(machine, "machine 7"))) == machine

@@ -69,6 +69,7 @@ def machine_to_toml(machine, header=""):
             {
                 "x_um": g.straightness_x_m / UM,
                 "y_um": g.straightness_y_m / UM,
+                "x_quartic_um": g.straightness_x_quartic_m / UM,
                 "yaw_x": bool(g.yaw_x),
                 "yaw_y": bool(g.yaw_y),
             },
