@@ -170,7 +170,7 @@ def seed_history(config, history, now=None, progress=None):
     """
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.baseline_setup import set_baseline
-    from imu_square.monitor.night import judge_recording, recording_row
+    from imu_square.monitor.night import judge_recording, recording_row, store_run
     from imu_square.simulate import read_sensor, simulate_run
     from imu_square.simulate.machine import machine_from_mapping
 
@@ -206,7 +206,8 @@ def seed_history(config, history, now=None, progress=None):
         path = folder / f"{MACHINE_ID}-{when:%Y%m%d-%H%M}.mcap"
         write_mcap(recording, path)
         if night < BASELINE_NIGHTS:
-            run_id, _ = history.add_run(recording_row(config, path, program)[0])
+            row, _, diagnostics = recording_row(config, path, program)
+            run_id, _ = store_run(history, row, diagnostics)
             baseline_runs.append(history.run(run_id))
             if night == BASELINE_NIGHTS - 1:
                 say("setting the baseline from the first 8 nights and designing its alarms")
