@@ -143,3 +143,24 @@ def test_outputs_under_a_missing_mount_point_are_refused_not_made(tmp_path, caps
         err = capsys.readouterr().err
         assert "cannot create the data folder" in err and "does not exist (not mounted?)" in err
     assert not (tmp_path / "mnt").exists()
+
+
+def test_init_takes_the_program_and_the_analysis_its_plan_assumed(tmp_path, capsys):
+    # init wrote [analysis] cutoff_hz = 4.0 whatever the program: a 3.2 Hz circle was
+    # filtered at 4 Hz. It now follows the program unless a plan file says otherwise.
+    plan = tmp_path / "plan.toml"
+    argv = ["plan", "--noise-density-ug", "25", "--max-feed-mm-min", "30000"]
+    argv += ["--max-accel-m-s2", "10", "--travel-mm", "500", "--time-s", "60", "-o", str(plan)]
+    assert main(argv) == 0
+    assert "cutoff_hz =" not in plan.read_text().split("[analysis]")[1]
+    monitor = tmp_path / "mill-3.toml"
+    assert main(["init", "--machine-id", "mill-3", "-o", str(monitor), "--program", str(plan)]) == 0
+    config = read_monitor(monitor)
+    assert config.program == plan and config.test_program().feed_m_per_s == 0.5
+    assert config.analysis.cutoff_hz is None  # 8 pi x the circle frequency, as analyze
+    # a plan's own [analysis] comes with it
+    plan.write_text(plan.read_text() + "cutoff_hz = 30.0\n")
+    assert main(["init", "--machine-id", "mill-3", "-o", str(monitor), "--program", str(plan),
+                 "--force"]) == 0  # fmt: skip
+    assert read_monitor(monitor).analysis.cutoff_hz == 30.0
+    capsys.readouterr()

@@ -547,3 +547,18 @@ def test_an_unexpected_numerical_failure_is_one_line_naming_its_step(rig, capsys
     assert record["invalid_reason"] == (
         "the analysis failed: ValueError: array must not contain infs or NaNs"
     )
+
+
+def test_a_cut_recording_is_judged_when_its_analysis_accepts_it_invalid_when_not(rig, capsys):
+    # The README's table said 3 for an incomplete recording while the monitor exited 12.
+    config = rig / "monitor.toml"
+    whole = night(rig, 5).read_bytes()
+    lead_out_lost = rig / "cut-late.mcap"
+    lead_out_lost.write_bytes(whole[: len(whole) - 2_000])  # the last chunk, in the lead-out
+    code, record = judge(config, lead_out_lost, capsys)
+    assert record["state"] in ("ok", "warning") and code == EXIT_CODES[record["state"]]
+    assert any("incomplete MCAP file" in w for w in record["warnings"])
+    block_lost = rig / "cut-early.mcap"
+    block_lost.write_bytes(whole[: len(whole) // 2])  # the second block is gone
+    code, record = judge(config, block_lost, capsys)
+    assert record["state"] == "invalid" and code == EXIT_CODES["invalid"] == 12

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from datetime import UTC
 from pathlib import Path
 
-from imu_square.errors import ImuSquareError
+from imu_square.errors import ImuSquareError, ImuSquareWarning
 from imu_square.log import logger
 from imu_square.monitor.history.encoding import datetime_from_ns
 
@@ -101,6 +101,8 @@ def last_valid_result(assessment, options):
     result : RunResult or None
     path : str
     """
+    import warnings
+
     from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.squareness import analyze
 
@@ -108,7 +110,9 @@ def last_valid_result(assessment, options):
         run = night.run
         if run.valid and Path(run.recording_path).is_file():
             try:
-                return analyze(read_mcap(run.recording_path), options), run.recording_path
+                with warnings.catch_warnings():  # said when the night was stored, with it
+                    warnings.simplefilter("ignore", ImuSquareWarning)
+                    return analyze(read_mcap(run.recording_path), options), run.recording_path
             except ImuSquareError as exc:
                 logger.warning("%s: cannot redraw the last run: %s", run.recording_path, exc)
     return None, ""
