@@ -53,9 +53,15 @@ def backlash_night(folder, day, backlash_um=BACKLASH_UM):
     return path
 
 
-def _folder(folder, extra=""):
+def _folder(folder, extra="", alert_states=None):
+    text = MONITOR.format(program=folder / "program.toml")
+    if alert_states is not None:
+        text = text.replace(
+            'states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]',
+            f'states = {alert_states!r}\nmode = "append"'.replace("'", '"'),
+        )
     (folder / "program.toml").write_text(PROGRAM.to_toml())
-    (folder / "monitor.toml").write_text(MONITOR.format(program=folder / "program.toml") + extra)
+    (folder / "monitor.toml").write_text(text + extra)
     return folder / "monitor.toml"
 
 
@@ -63,7 +69,7 @@ def _folder(folder, extra=""):
 def grown(tmp_path_factory):
     """A 5-night baseline, then nights whose backlash grows 3 µm a week, judged nightly."""
     folder = tmp_path_factory.mktemp("diagnostics")
-    config = _folder(folder, ALARMED)
+    config = _folder(folder, ALARMED, alert_states=["alarm"])  # the sink takes alarms only
     runs = [str(backlash_night(folder, d)) for d in range(5)]
     assert main(["baseline", "set", "--config", str(config), *runs]) == 0
     records, codes = [], []
@@ -79,7 +85,7 @@ def grown(tmp_path_factory):
 
 @pytest.mark.slow
 def test_backlash_growing_3um_a_week_fires_its_alarm_while_the_squareness_stays_ok(grown):
-    _, records, codes = grown
+    folder, records, codes = grown
     # the first night after the baseline has the baseline's backlash: no alarm
     day, _, first = records[0]
     assert first["diagnostics"]["backlash_x"]["state"] == "ok"
@@ -93,6 +99,10 @@ def test_backlash_growing_3um_a_week_fires_its_alarm_while_the_squareness_stays_
     assert backlash["change"] == pytest.approx(grown_um - BACKLASH_UM, abs=0.1)
     assert backlash["value"] == pytest.approx(grown_um, abs=0.1)
     assert "diagnostic alarm: backlash_x" in record["verdict"]
+    # the alarm went where the squareness's alarms go (the sink takes alarms only): the
+    # night's alert alone, its state the squareness's
+    (alert,) = map(json.loads, (folder / "data" / "alert.json").read_text().splitlines())
+    assert alert["state"] == "ok" and "diagnostic alarm: backlash_x" in alert["verdict"]
     # the squareness stays ok every night, and the exit code is the squareness's as before
     assert [r["state"] for _, _, r in records] == ["ok"] * len(records)
     assert codes == [EXIT_CODES["ok"]] * len(records)

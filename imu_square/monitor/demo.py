@@ -16,7 +16,11 @@ the machine's past nights, generated afresh (never committed):
 - a crash that moves the squareness by +45 µm/m: the alarm fires and stands;
 - a repair five nights later that brings it back within 2 µm/m, after which
   the maintenance team sets a new baseline from five nights;
-- one night whose recording was cut short, stored as invalid with its reason.
+- one night whose recording was cut short, stored as invalid with its reason;
+- all along, the X axis's backlash wears from 3 µm by 1 µm a week: every
+  night's diagnostics (:mod:`imu_square.monitor.diagnostics`) trend it, and
+  its own alarm (2 µm, in the monitor file's ``[diagnostics.alarms]``) fires
+  while the squareness is ``ok``.
 
 Tonight is then recorded through the emulated board like any night.
 """
@@ -43,6 +47,8 @@ CUT_NIGHT = 36
 COLD_NIGHTS = (11, 15, 19, 35, 38, 40)
 WARM_UPTIME_S = 5 * 3600.0
 COLD_UPTIME_S = 30.0
+BACKLASH_X_UM = 3.0
+BACKLASH_WEAR_UM_PER_WEEK = 1.0
 
 _PROGRAM = """\
 # The demo's warm-up cycle: r = 25 mm at 9000 mm/min (omega = 6 rad/s, 0.9 m/s^2).
@@ -100,6 +106,9 @@ file = "program.toml"
 false_alarm_nights = 730
 step_um_per_m = 30.0
 
+[diagnostics.alarms]
+backlash_x_um = 2.0
+
 [alerts.json_file]
 path = "data/latest-alert.json"
 mode = "latest"
@@ -110,11 +119,13 @@ textfile = "data/{machine_id}.prom"
 """
 
 
-def _machine_text(alpha_um_per_m):
+def _machine_text(alpha_um_per_m, night):
     from imu_square.simulate import data_path
 
     text = Path(data_path("machine_typical.toml")).read_text(encoding="utf-8")
     text = text.replace('name = "typical"', f'name = "{MACHINE_ID}"')
+    backlash = BACKLASH_X_UM + BACKLASH_WEAR_UM_PER_WEEK * night / 7
+    text = text.replace("[backlash]\nx_um = 3.0", f"[backlash]\nx_um = {backlash:.3f}")
     return text.replace(
         "machine_squareness_um_per_m = 15.0", f"machine_squareness_um_per_m = {alpha_um_per_m}"
     )
@@ -146,7 +157,7 @@ def write_demo_files(folder):
         "monitor.toml": _MONITOR.format(machine_id=MACHINE_ID),
         "program.toml": _PROGRAM,
         "sensor.toml": _SENSOR,
-        "machine.toml": _machine_text(REPAIRED_UM_PER_M),
+        "machine.toml": _machine_text(REPAIRED_UM_PER_M, NIGHTS),
     }
     for name, text in files.items():
         if not (folder / name).exists():
@@ -185,7 +196,7 @@ def seed_history(config, history, now=None, progress=None):
     say(f"seeding {NIGHTS} past nights of {MACHINE_ID} from the simulator into {history.location}")
     baseline_runs, repaired = [], []
     for night in range(NIGHTS):
-        machine = machine_from_mapping(tomllib.loads(_machine_text(_alpha(night))), "demo")
+        machine = machine_from_mapping(tomllib.loads(_machine_text(_alpha(night), night)), "demo")
         when = first + timedelta(days=night, minutes=float(rng.uniform(0, 20)))
         uptime = COLD_UPTIME_S if night in COLD_NIGHTS else WARM_UPTIME_S
         recording, _ = simulate_run(
