@@ -149,9 +149,7 @@ def main():
     print(f"{'machine':36} {'before (workflow)':>18} {'after (nightly fit)':>20} {'sim runs':>9}")
     for label, c in cases.items():
         before = f"{c['before_s']:.1f}" if "before_s" in c else "-"
-        print(
-            f"{label:36} {before:>18} {c['after_s']:>20.1f} {c['after_simulator_runs']:>9.0f}"
-        )
+        print(f"{label:36} {before:>18} {c['after_s']:>20.1f} {c['after_simulator_runs']:>9.0f}")
     f = doc["fleet"]
     walls = ", ".join(f"{h:.1f} h on {n} cores" for n, h in f["wall_hours"].items())
     print(
