@@ -13,7 +13,7 @@ import json
 from datetime import timedelta
 
 import pytest
-from monitor_rig import ALPHA, MONITOR, PROGRAM, SENSOR, START, judge
+from monitor_rig import ALPHA, MONITOR, NO_DIAGNOSTICS, PROGRAM, SENSOR, START, judge
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
@@ -54,7 +54,7 @@ def backlash_night(folder, day, backlash_um=BACKLASH_UM):
 
 
 def _folder(folder, extra="", alert_states=None):
-    text = MONITOR.format(program=folder / "program.toml")
+    text = MONITOR.format(program=folder / "program.toml").replace(NO_DIAGNOSTICS, "\n")
     if alert_states is not None:
         text = text.replace(
             'states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]',
