@@ -42,7 +42,8 @@ NO_DIAGNOSTICS = """
 [diagnostics]
 effects = []
 """
-MONITOR = """\
+MONITOR = (
+    """\
 [monitor]
 machine_id = "m1"
 history = "history.db"
@@ -62,7 +63,9 @@ monte_carlo_nights = 200000
 [alerts.json_file]
 path = "data/alert.json"
 states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]
-""" + NO_DIAGNOSTICS
+"""
+    + NO_DIAGNOSTICS
+)
 
 
 def night(folder, day, alpha=ALPHA, sensor=SENSOR, seed=None):
