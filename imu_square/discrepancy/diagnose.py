@@ -16,7 +16,9 @@ trend has to start below the detection limit to be seen early.
    lag of both axes is the time anchor, so the servo mismatch is fitted as
    one axis's lag;
 4. Gauss-Newton steps on the whitened fit vector, the Jacobian taken again
-   at each. The first :data:`UNCLIPPED_STEPS` take the unclipped residual:
+   at each but after a step that moved no parameter by more than
+   :data:`REUSE_JACOBIAN_U` of its uncertainty (then the step is a chord
+   step on the last one). The first :data:`UNCLIPPED_STEPS` take the unclipped residual:
    the effects not yet in the model stand beyond the clipping at a few noise
    sigmas (:data:`~imu_square.discrepancy.model_fit.CLIP_SIGMA`), where the
    clipped residual would show only a few sigmas of a friction spike many
@@ -63,6 +65,10 @@ UNCLIPPED_STEPS = 2
 # and the time anchors far off after two steps, where clipped steps crawl.
 UNCLIPPED_UNTIL_U = 10.0
 UNCLIPPED_MAX = 5
+# A step that moved no parameter by more than this many of its standard uncertainties keeps
+# the Jacobian for the next (a chord step: one simulator run instead of one a parameter). So
+# close, the derivatives do not change: a clean recording's fit moves 1.4 u, then 0.06 u.
+REUSE_JACOBIAN_U = 3.0
 # The steps stop after a clipped one that moved no parameter by more than this many of its
 # standard uncertainties.
 SETTLED_U = 1.0
@@ -231,7 +237,10 @@ def fit_effects(recording, program, effects, shapes=None, analysis=None, max_ste
             or steps >= UNCLIPPED_MAX
             or (steps >= UNCLIPPED_STEPS and moved <= UNCLIPPED_UNTIL_U)
         )
-        jac = np.column_stack([problem.space.fit_vector(c) for c in problem.columns(state, params)])
+        if moved > REUSE_JACOBIAN_U:
+            jac = np.column_stack(
+                [problem.space.fit_vector(c) for c in problem.columns(state, params)]
+            )
     rss = problem.rss(state)
     dof = max(jac.shape[0] - len(params), 1)
     scale = max(1.0, math.sqrt(rss / dof))
