@@ -25,6 +25,7 @@ the machine's past nights, generated afresh (never committed):
 Tonight is then recorded through the emulated board like any night.
 """
 
+import os
 import shutil
 import tomllib
 from datetime import UTC, datetime, timedelta
@@ -32,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import read_monitor
 
 MACHINE_ID = "demo-mill"
@@ -181,7 +183,9 @@ def seed_history(config, history, now=None, progress=None):
     """
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.baseline_setup import set_baseline
-    from imu_square.monitor.night import judge_recording, recording_row, store_run
+    from imu_square.monitor.history.rows import RunRow
+    from imu_square.monitor.night import judge_recording, store_run
+    from imu_square.monitor.replay import ReplayJob, run_local
     from imu_square.simulate import read_sensor, simulate_run
     from imu_square.simulate.machine import machine_from_mapping
 
@@ -194,7 +198,7 @@ def seed_history(config, history, now=None, progress=None):
     first = (now - timedelta(days=NIGHTS)).replace(hour=2, minute=30, second=0, microsecond=0)
     rng = np.random.default_rng(20261124)
     say(f"seeding {NIGHTS} past nights of {MACHINE_ID} from the simulator into {history.location}")
-    baseline_runs, repaired = [], []
+    paths, whens = [], []
     for night in range(NIGHTS):
         machine = machine_from_mapping(tomllib.loads(_machine_text(_alpha(night), night)), "demo")
         when = first + timedelta(days=night, minutes=float(rng.uniform(0, 20)))
@@ -216,17 +220,29 @@ def seed_history(config, history, now=None, progress=None):
             recording.events = [e for e in recording.events if e.time_ns <= recording.time_ns[-1]]
         path = folder / f"{MACHINE_ID}-{when:%Y%m%d-%H%M}.mcap"
         write_mcap(recording, path)
+        paths.append(str(path))
+        whens.append(when)
+    # every night's analysis and diagnostic fit over the cores (a replay's per-file work),
+    # then the nights judged in order as each came
+    say(f"analysing them and fitting their diagnostics on {os.cpu_count() or 1} core(s)")
+    job = ReplayJob(config.machine_id, config.analysis, program, config.diagnostics)
+    made = {}
+    for outcome in run_local(paths, job):
+        if outcome.row is None:
+            raise ImuSquareError(f"{outcome.path}: {outcome.reason}")
+        made[outcome.path] = (RunRow(**outcome.row), None, outcome.diagnostics)
+    baseline_runs, repaired = [], []
+    for night, path in enumerate(paths):
         if night < BASELINE_NIGHTS:
-            row, _, diagnostics = recording_row(config, path, program)
-            run_id, _ = store_run(history, row, diagnostics)
+            run_id, _ = store_run(history, made[path][0], made[path][2])
             baseline_runs.append(history.run(run_id))
             if night == BASELINE_NIGHTS - 1:
                 say("setting the baseline from the first 8 nights and designing its alarms")
                 set_baseline(config, history, baseline_runs, note="demo: eight warm nights")
             continue
-        outcome = judge_recording(config, history, path, program)
+        outcome = judge_recording(config, history, path, program, made=made[path])
         if outcome.state != "ok":
-            say(f"  {when:%Y-%m-%d}: {outcome.verdict}")
+            say(f"  {whens[night]:%Y-%m-%d}: {outcome.verdict}")
         if night in NEW_BASELINE_NIGHTS:
             repaired.append(history.run(outcome.run_id))
             if night == NEW_BASELINE_NIGHTS[-1]:

@@ -399,7 +399,7 @@ def _earlier_periods(config, history, current):
     return tuple(periods)
 
 
-def judge_recording(config, history, path, program=None, alert=False):
+def judge_recording(config, history, path, program=None, alert=False, made=None):
     """Analyse, store and judge one night's recording.
 
     The run, its verdict and, with ``alert``, the night's alert for each sink
@@ -419,12 +419,16 @@ def judge_recording(config, history, path, program=None, alert=False):
         The program the monitor expects.
     alert : bool
         Keep the night's alert in the outbox (a seeded past night has none).
+    made : tuple, optional
+        ``(row, result, diagnostics)`` of :func:`recording_row` for this
+        recording, made already (elsewhere, in parallel); the recording is
+        not read again.
 
     Returns
     -------
     NightOutcome
     """
-    row, result, diagnostics = recording_row(config, path, program)
+    row, result, diagnostics = made or recording_row(config, path, program)
     with history.transaction():
         run_id, inserted = store_run(history, row, diagnostics)
         assessment = judge_history(config, history)
