@@ -199,6 +199,11 @@ def test_a_version_4_history_gets_empty_diagnostics_and_keeps_its_runs_and_basel
             for i, v in enumerate(fit.values)
         )
         assert got.failure is None and got.fit == {"rss": 1.0}
+        # a replay skips the recording now that its valid run has a fit under these settings
+        assert h.diagnosed_hashes(MACHINE, row.settings_hash, fit.settings_hash) == {
+            row.recording_sha256
+        }
+        assert h.diagnosed_hashes(MACHINE, row.settings_hash, "0" * 64) == set()
         h.set_diagnostic_designs(base, {"backlash_x": {"key": "k"}})
         assert h.current_baseline(MACHINE).diagnostic_designs == {"backlash_x": {"key": "k"}}
         # a stored diagnostic with neither a value nor a reason is refused by the database
