@@ -64,7 +64,7 @@ def commands():
     return dict(sorted(out.items()))
 
 
-def build_parser(only=None):
+def build_parser(only=None, full=False):
     """The argument parser: every subcommand listed, or ``only`` registered in full.
 
     Parameters
@@ -73,6 +73,9 @@ def build_parser(only=None):
         The one command to register (and so to import): a command pays only
         for its own imports at start-up. Without it, every command is listed
         by its ``HELP`` alone, none imported: the parser of ``imu-square --help``.
+    full : bool
+        Register every command in full, importing them all: the parser the
+        documentation's CLI reference is generated from.
 
     Returns
     -------
@@ -91,7 +94,9 @@ def build_parser(only=None):
     parser.add_argument("-q", "--quiet", action="store_true", help="errors only")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in commands().items():
-        if only is None:
+        if full:
+            importlib.import_module(module).register(sub)
+        elif only is None:
             try:
                 summary = command_help(module)
             except (LookupError, OSError, SyntaxError, ValueError):

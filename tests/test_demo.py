@@ -18,16 +18,19 @@ from imu_square.monitor import demo
 @pytest.mark.slow
 def test_the_demo_night_ends_in_a_verdict_a_chart_and_a_report(tmp_path, capsys):
     folder = tmp_path / "demo"
-    assert main(["nightly", "--demo", str(folder), "--json"]) == 0
+    code = main(["nightly", "--demo", str(folder), "--json"])
     out = capsys.readouterr()
     tonight = json.loads(out.out.strip().splitlines()[-1])
-    assert tonight["state"] == "ok" and tonight["machine_id"] == demo.MACHINE_ID
+    # ok, or warning on the 2 % of in-control nights the charts are designed to warn on
+    # (tonight's emulated board is not seeded)
+    assert (tonight["state"], code) in (("ok", 0), ("warning", 10)), tonight
+    assert tonight["machine_id"] == demo.MACHINE_ID
     # tonight's machine is the repaired one, against the baseline set after the repair
     assert abs(tonight["change_urad"]) < 4 * tonight["u_change_urad"]
     data = folder / "data"
     for name in (f"{demo.MACHINE_ID}-trend.png", f"{demo.MACHINE_ID}-report.html"):
         assert (data / name).stat().st_size > 10_000, name
-    assert json.loads((data / "latest-alert.json").read_text())["state"] == "ok"
+    assert json.loads((data / "latest-alert.json").read_text())["state"] == tonight["state"]
 
     assert main(["history", "--config", str(folder / "monitor.toml"), "--json"]) == 0
     records = [json.loads(line) for line in capsys.readouterr().out.splitlines()]

@@ -101,7 +101,7 @@ def test_recorded_through_the_serial_path_within_the_stated_uncertainty(
     out = tmp_path / "out"
     argv = ["nightly", "--program", str(program), "--machine", str(_machine_file(tmp_path))]
     argv += ["--sensor", data_path("sensor_paper.toml"), "--motion", "linuxcnc"]
-    code = main([*map(str, argv), "--seed", "11", "--speed", "20", "--out", str(out)])
+    code = main([*map(str, argv), "--seed", "11", "--speed", "20", "--out", str(out), "--json"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     result = json.loads(captured.out.strip().splitlines()[-1])
@@ -187,9 +187,13 @@ def test_the_monitor_judges_controller_driven_nights(
 def test_the_demo_s_tonight_through_linuxcnc(linuxcnc_motions, tmp_path, capsys):
     code = main(["nightly", "--demo", str(tmp_path / "demo"), "--motion", "linuxcnc", "--json"])
     captured = capsys.readouterr()
-    assert code == 0, captured.err
-    assert "running the program on LinuxCNC" in captured.err
-    assert json.loads(captured.out.strip().splitlines()[-1])["state"] == "ok"
+    tonight = json.loads(captured.out.strip().splitlines()[-1])
+    # the past nights ran LinuxCNC's motion too: tonight's sensor is not taken for remounted;
+    # ok, or warning on the charts' designed 2 % (tonight's board is not seeded)
+    assert (tonight["state"], code) in (("ok", 0), ("warning", 10)), captured.err
+    assert abs(tonight["change_urad"]) < 4 * tonight["u_change_urad"]
+    assert "from the cache" in captured.err  # one LinuxCNC run serves all the nights
+    assert captured.err.count("running the program on LinuxCNC") <= 1
 
 
 def test_one_run_per_program_and_configuration(fast_motion):

@@ -453,9 +453,12 @@ def _check_night(config, out, recording, make=True):
 def run_demo(args):
     """Seed a demonstration machine's history from the simulator, then run its night."""
     from imu_square.errors import ImuSquareError
-    from imu_square.monitor.demo import prepare_demo
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.demo import prepare_demo, write_demo_files
 
     if args.config or args.recording:
         raise ImuSquareError("--demo makes its own monitor file and recording")
-    config = prepare_demo(Path(args.demo), progress=lambda text: print(text, file=sys.stderr))
+    folder = Path(args.demo)
+    motion = _motion(args, read_monitor(write_demo_files(folder)).test_program(), True)
+    config = prepare_demo(folder, progress=lambda text: print(text, file=sys.stderr), motion=motion)
     return run_monitor(args, config)

@@ -167,7 +167,7 @@ def write_demo_files(folder):
     return folder / "monitor.toml"
 
 
-def seed_history(config, history, now=None, progress=None):
+def seed_history(config, history, now=None, progress=None, motion=None):
     """Simulate and judge the demo machine's past nights into its history.
 
     Parameters
@@ -180,6 +180,9 @@ def seed_history(config, history, now=None, progress=None):
         Tonight (UTC); the past nights end yesterday at 02:30.
     progress : callable, optional
         Called with a line of text now and then.
+    motion : SampledMotion, optional
+        The commanded motion of every night (a controller's); None for our own
+        trajectory.
     """
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.baseline_setup import set_baseline
@@ -210,6 +213,7 @@ def seed_history(config, history, now=None, progress=None):
             seed=int(rng.integers(2**31)),
             t0_ns=int(when.timestamp() * 1e9),
             uptime_s=uptime,
+            motion=motion,
         )
         if night == CUT_NIGHT:  # the recording ends in the first block
             keep = recording.n_samples // 4
@@ -250,7 +254,7 @@ def seed_history(config, history, now=None, progress=None):
                 set_baseline(config, history, repaired, note="demo: after the repair")
 
 
-def prepare_demo(folder, progress=None, now=None):
+def prepare_demo(folder, progress=None, now=None, motion=None):
     """The demo's monitor file, with its history seeded when empty.
 
     Parameters
@@ -261,6 +265,11 @@ def prepare_demo(folder, progress=None, now=None):
         Called with a line of text now and then.
     now : datetime, optional
         Tonight (UTC).
+    motion : SampledMotion, optional
+        The commanded motion the past nights ran, tonight's too: a shop's history
+        comes from one controller, and the sensor's ``eps_c`` reads differently on
+        another one's ramps (by 0.05 deg on LinuxCNC's), which the monitor takes
+        for a remounted sensor.
 
     Returns
     -------
@@ -272,5 +281,5 @@ def prepare_demo(folder, progress=None, now=None):
     with config.open_history() as history:
         if not history.runs(config.machine_id):
             shutil.rmtree(config.output_dir() / "seed", ignore_errors=True)
-            seed_history(config, history, now=now, progress=progress)
+            seed_history(config, history, now=now, progress=progress, motion=motion)
     return config

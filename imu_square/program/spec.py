@@ -537,5 +537,10 @@ def read_program(path):
 
 
 def default_program():
-    """The paper's test: r = 100 mm, 6000 mm/min, 15 cycles each way, 180 deg overshoot."""
+    """The paper's test: r = 100 mm, 6000 mm/min, 15 cycles each way, 180 deg overshoot.
+
+    Returns
+    -------
+    TestProgram
+    """
     return TestProgram()
