@@ -8,11 +8,14 @@ sensor rotation within +-4 deg); each case hides one effect:
 
 - its direction: each size parameter at its declared typical value times a
   factor drawn in [0.5, 1.5], with a random sign where the physical range
-  allows one (the gravity coupling's four terms all at +-100 urad/m times
-  that factor); its shape drawn over a realistic range (spike time constant
-  10-40 ms, backlash take-up 2-10 ms, vibration 20-150 Hz and damping
-  0.02-0.1, warm-up time constant 100-1000 s, straightness with or without
-  each associated yaw);
+  allows one (spikes and backlash: either sign per axis; the gravity
+  coupling's four terms all at +-100 urad/m times that factor); its shape
+  drawn over a realistic range (spike time constant 10-40 ms, starting after,
+  centred on or leading the reversal; backlash take-up 2-10 ms, centred on
+  the reversal to starting at it, vibration
+  20-150 Hz and damping 0.02-0.1, warm-up time constant 100-1000 s, a pure
+  lag or a first-order servo,
+  straightness with or without each associated yaw);
 - its size: the detection limit times a ratio drawn log-uniformly in
   [0.5, 30], capped by the physical range. The detection limit is the size
   at which the workflow's test (chi-square with the effect's identifiable
@@ -53,6 +56,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from imu_square.discrepancy import VIEWS, DiscrepancyOptions, find_discrepancy
+from imu_square.discrepancy.result import headline_is_honest
 from imu_square.discrepancy.selection import Screener
 from imu_square.discrepancy.workflow import fit_base
 from imu_square.program import TestProgram
@@ -71,7 +75,10 @@ RATIO_BINS = (0.5, 1.0, 2.0, 3.0, 5.0, 10.0, 30.0)
 
 _SHAPES = {
     ("reversal_spikes", "tau_ms"): lambda r: math.exp(r.uniform(math.log(10), math.log(40))),
+    # after the reversal, centred on it, or leading it
+    ("reversal_spikes", "onset_tau"): lambda r: float(r.choice([0.0, -2.0, -4.0])),
     ("backlash", "take_up_ms"): lambda r: r.uniform(2.0, 10.0),
+    ("backlash", "onset"): lambda r: r.uniform(0.0, 3.0),  # centred on ... starting at the reversal
     ("structural_vibration", "frequency_hz"): lambda r: math.exp(
         r.uniform(math.log(20), math.log(150))
     ),
@@ -79,6 +86,7 @@ _SHAPES = {
     ("sensor_thermal_drift", "tau_warm_s"): lambda r: math.exp(
         r.uniform(math.log(100), math.log(1000))
     ),
+    ("servo_mismatch", "first_order"): lambda r: float(r.integers(2)),  # or a pure lag
     ("straightness_yaw", "yaw_x"): lambda r: float(r.integers(2)),
     ("straightness_yaw", "yaw_y"): lambda r: float(r.integers(2)),
 }
@@ -213,6 +221,7 @@ def run_case(spec):
     t0 = time.perf_counter()
     result = find_discrepancy(rec, DiscrepancyOptions(significance=SIGNIFICANCE, suggest=False))
     elapsed = time.perf_counter() - t0
+    doc = result.to_json_dict()
     named = set(result.named_effects)
     groups = [set(g) for g in result.ambiguous]
     found = {e: e in named or any(e in g for g in groups) for e in effects}
@@ -229,6 +238,8 @@ def run_case(spec):
         "explained": sorted(explained),
         "final_gap": {k: v.gap for k, v in result.final_gap.items()},
         "final_p": {k: v.p_value for k, v in result.final_gap.items()},
+        "headline": doc["headline"],
+        "headline_honest": headline_is_honest(doc),
         "coverage_z": {e: _coverage(result, e, truth[e]) for e in effects},
         "time_s": elapsed,
         "runs": result.evaluations,
@@ -350,6 +361,11 @@ def tables(rows):
             "named": [r["explained"] for r in clean if r["explained"]],
         }
     z_all = [v for r in single + pairs for zs in r["coverage_z"].values() for v in zs]
+    out["headline"] = {
+        "cases": len(rows),
+        "dishonest": [r["headline"] for r in rows if not r["headline_honest"]],
+        "gap_left": sum("gap is left" in r["headline"] for r in rows),
+    }
     out["coverage_k2_all"] = sum(v <= 2 for v in z_all) / len(z_all) if z_all else None
     out["median_time_s"] = statistics.median(r["time_s"] for r in rows)
     return out
@@ -408,6 +424,12 @@ def _print(summary, speed_rows):
         print(
             f"Clean: nothing named in {c['nothing_named']:.0%} of {c['cases']}; named: {c['named']}"
         )
+    h = summary["headline"]
+    print(
+        f"Headline rule (never 'explains' while a view's gap is left): honest in "
+        f"{h['cases'] - len(h['dishonest'])} of {h['cases']} cases; 'gap is left' in "
+        f"{h['gap_left']}"
+    )
     if summary.get("coverage_k2_all") is not None:
         print(f"Magnitude coverage at k = 2, all cases: {summary['coverage_k2_all']:.0%}")
 

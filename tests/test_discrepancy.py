@@ -16,6 +16,7 @@ from scipy import stats
 
 from imu_square.cli import main
 from imu_square.discrepancy import VIEWS, DiscrepancyOptions, find_discrepancy
+from imu_square.discrepancy.result import headline_is_honest
 from imu_square.discrepancy.workflow import fit_base
 from imu_square.io.mcap import read_mcap, write_mcap
 from imu_square.program import TestProgram
@@ -169,6 +170,67 @@ def test_effects_outside_the_allowed_ones_leave_a_gap(tmp_path, capsys):
     assert doc["final_gap"]["cw_vs_ccw"] > 1.5
     assert any("gap above the noise floor is left in" in n for n in doc["notes"])
     assert "note: a gap above the noise floor is left in" in err
+    # the first line a person reads says so, and so does the JSON
+    first = err.splitlines()[1]
+    assert first.startswith("a gap is left") and "NOT explained" in first, first
+    assert "explains" not in first
+    assert doc["explained"] is False and doc["headline"] == first
+    assert headline_is_honest(doc)
+    left = {g["view"]: g for g in doc["gap_left"]}
+    assert "cw_vs_ccw" in left and left["cw_vs_ccw"]["p_value"] < 1e-3
+    # a lag of y against x: a residual at the circle frequency in the direction difference
+    assert left["cw_vs_ccw"]["band"]["harmonics"] == [1, 1]
+    assert "position angle" in left["cw_vs_ccw"]["where"]
+    assert f"gap left in cw_vs_ccw ({left['cw_vs_ccw']['gap']:.2f})" in err
+
+
+def _honest_cases(tmp_path):
+    """Named, look-alike, gap-left and clean outcomes, each with its JSON."""
+    spikes = MachineModel(spike_x_m_s2=0.02, spike_y_m_s2=-0.02)
+    yield "clean", record(tmp_path, seed=11, name="clean.mcap")[0], ()
+    yield "servo named", record(tmp_path, machine=LAG, seed=2, name="lag.mcap")[0], ()
+    yield (
+        "servo not allowed",
+        record(tmp_path, machine=LAG, seed=6, name="lag6.mcap")[0],
+        (
+            "--effects-allowed",
+            "backlash",
+        ),
+    )
+    yield (
+        "spikes not allowed",
+        record(tmp_path, machine=spikes, seed=3, name="sp.mcap")[0],
+        (
+            "--effects-allowed",
+            "servo_mismatch",
+        ),
+    )
+
+
+def test_the_first_line_never_says_explained_while_a_gap_is_left(tmp_path, capsys):
+    """The headline rule (issue 22 section 2); the benchmarks check it on every case."""
+    seen = set()
+    for name, path, extra in _honest_cases(tmp_path):
+        _, out, err = run_cli(capsys, path, "--json", "--no-suggest", *extra)
+        doc = json.loads(out)
+        assert headline_is_honest(doc), (name, doc["headline"])
+        assert err.splitlines()[1] == doc["headline"]
+        seen.add(doc["explained"])
+        if not doc["explained"]:
+            assert all(g["where"] for g in doc["gap_left"]), name
+    assert seen == {True, False}
+
+
+def test_the_honesty_check_refuses_a_false_headline():
+    views = {v: {"gap": 1.0, "p_value": 0.5} for v in VIEWS}
+    doc = {"views": {"final": views}, "explained": True, "headline": "the base model explains it"}
+    assert headline_is_honest(doc)
+    views["reversals"] = {"gap": 21.0, "p_value": 1e-30}
+    assert not headline_is_honest(doc)
+    doc.update(explained=False, headline="a gap is left that no candidate explains, in reversals")
+    assert not headline_is_honest(doc)  # "explains" in a headline with a gap left
+    doc["headline"] = "a gap is left in reversals (21.00): the recording is NOT explained"
+    assert headline_is_honest(doc)
 
 
 @pytest.mark.parametrize(

@@ -101,10 +101,10 @@ def test_simulate_defaults_and_no_events(tmp_path, capsys):
 def test_simulate_user_errors_are_one_line(tmp_path):
     program, _ = write_inputs(tmp_path)
     bad = tmp_path / "m.toml"
-    bad.write_text("[backlash]\nx_um = -1\n")
+    bad.write_text("[backlash]\nx_um = -1001\n")  # negative is over-compensated, allowed
     for extra, needle in (
         (["--effects", "wobble"], "unknown effect 'wobble'"),
-        (["--machine", str(bad)], "[backlash] x_um must be in [0, 1000], got -1.0"),
+        (["--machine", str(bad)], "[backlash] x_um must be in [-1000, 1000], got -1001.0"),
     ):
         argv = ["simulate", "--program", str(program), "-o", str(tmp_path / "r.mcap"), *extra]
         proc = subprocess.run(

@@ -79,7 +79,10 @@ def test_machine_file_units(tmp_path):
     [
         ("[machin]\nname = 'x'\n", r"m.toml: unknown section \[machin\]; allowed: \["),
         ("[backlash]\nx_mm = 5\n", r"\[backlash\] has unknown field 'x_mm'; allowed: \["),
-        ("[backlash]\nx_um = -5\n", r"\[backlash\] x_um must be in \[0, 1000\], got -5.0"),
+        (
+            "[backlash]\nx_um = -5000\n",
+            r"\[backlash\] x_um must be in \[-1000, 1000\], got -5000.0",
+        ),
         ("[servo_mismatch]\ntau_x_ms = 'fast'\n", r"tau_x_ms must be a number, got 'fast'"),
         (
             "[servo_mismatch]\nmodel = 'pid'\n",

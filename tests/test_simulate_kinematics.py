@@ -11,6 +11,7 @@ breakpoints) are left out.
 """
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from numpy.testing import assert_allclose
 
 from imu_square.program import TestProgram
 from imu_square.simulate import MachineModel, chapman_machine, simulate_run
+from imu_square.simulate.drive import add_spikes
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.kinematics import carriage_motion
 from imu_square.simulate.trajectory import build_timeline, ramp_fraction
@@ -62,18 +64,23 @@ def breakpoints(timeline, machine):
     for axis, tau in ((0, machine.tau_x_s), (1, machine.tau_y_s)):
         times, _, _ = timeline.reversals(axis)
         points += list(times + tau)
+        points += list(times + tau + machine.spike_onset * machine.spike_tau_s)
     return np.array(points)
 
 
 FIRST_ORDER = MachineModel(
     tau_x_s=2e-3, tau_y_s=3e-3, servo_model="first_order", backlash_x_m=5e-6, spike_y_m_s2=0.02
 )
+# over-compensated: negative backlash, inward spikes that lead the reversal
+SIGNED = replace(
+    ALL_DRIVE, backlash_x_m=-5e-6, spike_x_m_s2=-0.02, spike_y_m_s2=0.01, spike_onset=-3.0
+)
 
 
 @pytest.mark.parametrize(
     "machine",
-    [MachineModel(), ALL_DRIVE, FIRST_ORDER],
-    ids=["ideal", "all-effects", "first-order-servo"],
+    [MachineModel(), ALL_DRIVE, FIRST_ORDER, SIGNED],
+    ids=["ideal", "all-effects", "first-order-servo", "signed-led"],
 )
 def test_analytic_derivatives_match_finite_differences(machine):
     timeline = build_timeline(PROGRAM, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
@@ -185,3 +192,23 @@ def test_chapman_yaw_rotates_the_sensor_with_the_carriage():
     _, truth = simulate_run(program, MachineModel(geometry=g), seed=0, lead_in_s=0.5)
     assert_allclose(truth["carriage_yaw_rad"], 25e-6, rtol=1e-12)
     assert_allclose(truth["local_machine_squareness_rad"], 15e-6, rtol=1e-12)
+
+
+@pytest.mark.parametrize("onset", [0.0, -2.0, -4.0])
+@pytest.mark.parametrize("peak", [0.02, -0.03])
+def test_spike_sign_and_timing_around_the_reversal(onset, peak):
+    """The bump's acceleration peak is ``peak`` (outward: against the new direction's
+    lag, i.e. along ``-d``), at ``onset * tau`` from the reversal; its area is zero."""
+    tau = 0.01
+    t = np.arange(-0.2, 0.4, 1e-5)
+    p = [np.zeros_like(t) for _ in range(3)]
+    add_spikes(p, t, np.array([0.0]), np.array([1]), peak, tau, onset)
+    i = int(np.argmax(np.abs(p[2])))
+    assert t[i] == pytest.approx(onset * tau, abs=2e-5)
+    assert p[2][i] == pytest.approx(-peak, rel=1e-3)  # d = +1: the bump is -d h ...
+    # zero area: the sum misses only half of the step at the onset (peak * dt / 2)
+    assert np.sum(p[2]) * 1e-5 == pytest.approx(0.0, abs=1e-5 * abs(peak))
+    assert p[0][t < onset * tau - 1e-9].max(initial=0.0) == 0.0  # nothing before its onset
+    # the position peak, h e^-2 (4 h / e^2 at u = 2), is at (onset + 2) tau
+    j = int(np.argmax(np.abs(p[0])))
+    assert t[j] == pytest.approx((onset + 2) * tau, abs=2e-5)

@@ -17,8 +17,10 @@ def register(sub):
         description="Fit the simulator (the paper's model: squareness, sensor rotation and "
         "offsets) to a recording, show where they disagree in views normalised by the noise "
         "floor, add the effect of the simulator's vocabulary that best explains the gap, "
-        "refit, and repeat while an effect is significant. Exit 0 when the base model "
-        "explains the recording, 1 when effects were named, 2 on a user error.",
+        "refit, and repeat while an effect is significant. The first line says whether a "
+        "view's gap is left above the noise after the last step, and the lines 'gap left "
+        "in' say where. Exit 0 when no effect was named, 1 when effects were named, 2 on a "
+        "user error.",
     )
     p.add_argument("recording", metavar="RUN.mcap", help="the recording")
     p.add_argument("--json", action="store_true", help="the result as JSON on stdout")

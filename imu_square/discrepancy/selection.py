@@ -47,8 +47,11 @@ from imu_square.discrepancy.parameters import effect_model_parameters
 from imu_square.log import logger
 from imu_square.simulate.effects import SHAPE, SIZE
 
-# Shape grids longer than twice this are scanned at every COARSE_STEP-th point first.
+# Shape grids longer than FULL_SCAN are scanned at every COARSE_STEP-th point first
+# (a product of two shapes' grids, up to FULL_SCAN points, is scanned whole: every third
+# point of its flattened order would see one value of the faster-varying shape only).
 COARSE_STEP = 3
+FULL_SCAN = 16
 # A candidate whose screening p-value is within this factor of the level is refitted,
 # and the refit's likelihood ratio decides (the shape grid may miss the best shape).
 REFIT_SLACK = 10.0
@@ -238,9 +241,7 @@ class Screener:
                 scored[i] = (v, _lr(r, _perp(q, v))[0])
             return scored[i][1]
 
-        coarse = (
-            range(0, len(grid), COARSE_STEP) if len(grid) > 2 * COARSE_STEP else range(len(grid))
-        )
+        coarse = range(0, len(grid), COARSE_STEP) if len(grid) > FULL_SCAN else range(len(grid))
         best = max(coarse, key=score)
         for i in range(best - COARSE_STEP + 1, best + COARSE_STEP):
             if 0 <= i < len(grid):

@@ -27,6 +27,7 @@ from imu_square.discrepancy.features import FeatureOperator
 from imu_square.discrepancy.forward import ForwardModel
 from imu_square.discrepancy.identify import Member, signature_correlations, suggest_tests
 from imu_square.discrepancy.layout import layout_from_recording
+from imu_square.discrepancy.localise import gaps_left, locate_gaps
 from imu_square.discrepancy.model_fit import Problem
 from imu_square.discrepancy.parameters import (
     BASE,
@@ -48,8 +49,6 @@ from imu_square.simulate.presets import EFFECTS, parse_effects
 from imu_square.simulate.sensor import SensorModel
 from imu_square.units import G
 
-# A view whose p-value with the final model is below this is reported in the notes.
-GAP_NOTE_P = 1e-3
 # The noise floor is estimated again from the residual when its variance moved more.
 NOISE_CHANGE = 0.05
 
@@ -158,6 +157,12 @@ def _step_values(step, state):
     out = list(_values(step.after, step.params, state))
     out += [
         FittedValue(p.name, p.get(state), math.nan, p.unit, identifiable=False) for p in step.fixed
+    ]
+    # a choice of two (first-order servo, associated yaw): the scan's pick, held in the fit
+    out += [
+        FittedValue(p.name, p.get(state), math.nan, p.unit)
+        for p in effect_model_parameters(step.effect)
+        if p.declared.is_flag
     ]
     return tuple(out)
 
@@ -488,13 +493,14 @@ def find_discrepancy(recording, options=None, program=None, motion=None):
         for p in s.fixed
     )
     state = _clip_to_range(state, steps_in, notes)
-    left = [k for k, v in final_gap.items() if math.isfinite(v.gap) and v.p_value < GAP_NOTE_P]
+    left = [v.name for v in gaps_left(final_gap)]
     if left:
         notes.append(
             "a gap above the noise floor is left in "
             + ", ".join(f"{k} ({final_gap[k].gap:.2f})" for k in left)
             + ": an effect outside the candidates, or one too weak to name alone"
         )
+    locations, curves = locate_gaps(problem.space, final.residual, final_gap)
     logger.debug("discrepancy: %d simulator runs, %s", model.evaluations, timings)
     return DiscrepancyResult(
         base=_values(base, base_params),
@@ -519,4 +525,6 @@ def find_discrepancy(recording, options=None, program=None, motion=None):
         notes=tuple(notes),
         timings_s=timings,
         evaluations=model.evaluations,
+        gap_left=locations,
+        curves=curves,
     )

@@ -7,11 +7,16 @@ direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
 - backlash ``b``: the axis lags the command by ``b/2`` against its direction of
   motion, taken up smoothly: offset ``-(b/2) D(t)``, where ``D`` steps from the
   old to the new direction along ``(1 + tanh(t'/tau_b)) / 2``. The take-up
-  is centred on the reversal, so half of it happens before the commanded
-  reversal (acausal, a smooth stand-in for the real take-up, which starts
-  at the reversal); the reversal times in the truth are its centre;
-- reversal spike: following-error bump ``-d h u^2 exp(-u)``, ``u = t'/tau_s``,
+  is centred on the reversal shifted by ``o_b tau_b`` (``o_b = 0``: half of
+  it happens before the commanded reversal, an acausal smooth stand-in; ``o_b``
+  of 2 or more: the take-up starts at the reversal, as a play operator's
+  does); ``b`` is signed (negative: over-compensated, the table is thrown
+  ahead); the reversal times in the truth are the commanded ones;
+- reversal spike: following-error bump ``-d h u^2 exp(-u)``, ``u = t'/tau_s - o``,
   whose acceleration starts at the peak ``2 h / tau_s^2`` and has zero area;
+  ``h`` is signed (negative: inward, an over-set friction compensation) and the
+  onset ``o`` (in ``tau_s``) places it after the reversal (0), centred on it
+  (-2: the position peak on the reversal) or leading it (below -2);
 - structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which
   starts with zero position and velocity and acceleration ``D omega_d^2``.
 """
@@ -29,7 +34,7 @@ def _window(t, start, stop):
     return slice(*np.searchsorted(t, (start, stop), side="left"))
 
 
-def add_backlash(p, t, times, directions, initial, lost_m, take_up_s):
+def add_backlash(p, t, times, directions, initial, lost_m, take_up_s, onset=0.0):
     """Add backlash to an axis path in place.
 
     Parameters
@@ -46,9 +51,12 @@ def add_backlash(p, t, times, directions, initial, lost_m, take_up_s):
         Lost motion b. [m]
     take_up_s : float
         Time constant tau_b of the take-up. [s]
+    onset : float
+        Centre of the take-up after the reversal, in units of ``take_up_s``.
     """
     if lost_m == 0:
         return
+    times = np.asarray(times) + onset * take_up_s
     previous = np.concatenate(([initial], directions[:-1])) if len(directions) else []
     # D(t): the direction steps after each take-up window, smooth inside it
     steps = np.zeros(len(t) + 1)
@@ -67,7 +75,7 @@ def add_backlash(p, t, times, directions, initial, lost_m, take_up_s):
     p[0] += -0.5 * lost_m * state
 
 
-def add_spikes(p, t, times, directions, peak_m_s2, tau_s):
+def add_spikes(p, t, times, directions, peak_m_s2, tau_s, onset=0.0):
     """Add friction following-error bumps after each reversal, in place.
 
     Parameters
@@ -79,14 +87,17 @@ def add_spikes(p, t, times, directions, peak_m_s2, tau_s):
     times, directions : ndarray
         Reversal times [s] and the direction after each.
     peak_m_s2 : float
-        Peak acceleration ``2 h / tau_s^2`` of the bump. [m/s^2]
+        Peak acceleration ``2 h / tau_s^2`` of the bump; negative inward. [m/s^2]
     tau_s : float
         Time constant of the bump. [s]
+    onset : float
+        Start of the bump after the reversal, in units of ``tau_s`` (negative: before).
     """
     if peak_m_s2 == 0:
         return
     h = 0.5 * peak_m_s2 * tau_s**2
     for tk, dk in zip(times, directions, strict=True):
+        tk = tk + onset * tau_s
         sl = _window(t, tk, tk + _SPIKE_WINDOW * tau_s)
         u = (t[sl] - tk) / tau_s
         e = -dk * h * np.exp(-u)

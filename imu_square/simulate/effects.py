@@ -96,7 +96,9 @@ class EffectParameter:
             a, b = self.path.split("-")
             first = _get(obj, a)
             return 0.0 if first is None else float(first) - float(_get(obj, b))
-        return float(_get(obj, self.path))
+        value = _get(obj, self.path)
+        choices = _FLAGS.get(self.path.rpartition(".")[2])
+        return float(choices.index(value)) if choices else float(value)
 
     def set(self, machine, sensor, value_si):
         """A new (machine, sensor) with this parameter at ``value_si``."""
@@ -124,12 +126,20 @@ def _get(obj, path):
     return _get(value, rest) if rest else value
 
 
+# Fields that hold a choice of two: a flag's 0 and 1 in the file's terms.
+_FLAGS = {
+    "yaw_x": (False, True),
+    "yaw_y": (False, True),
+    "servo_model": ("pure_lag", "first_order"),
+}
+
+
 def _set(obj, path, value):
     name, index, rest = _split(path)
     if rest:
         return replace(obj, **{name: _set(getattr(obj, name), rest, value)})
-    if name in ("yaw_x", "yaw_y"):
-        value = bool(value >= 0.5)
+    if name in _FLAGS:
+        value = _FLAGS[name][int(value >= 0.5)]
     if index is not None:
         items = list(getattr(obj, name))
         items[index] = value
@@ -149,6 +159,20 @@ EFFECT_PARAMETERS = {
     "servo_mismatch": (
         _p("servo_mismatch", "tau_x_ms", "ms", MS, 0.0, 20.0, 2.0, SIZE, "machine", "tau_x_s"),
         _p("servo_mismatch", "tau_y_ms", "ms", MS, 0.0, 20.0, 3.0, SIZE, "machine", "tau_y_s"),
+        # a pure lag, or a first-order loop 1 / (1 + s tau), whose circle is also smaller
+        _p(
+            "servo_mismatch",
+            "first_order",
+            "flag",
+            1.0,
+            0.0,
+            1.0,
+            0.0,
+            SHAPE,
+            "machine",
+            "servo_model",
+            scan=(0.0, 1.0),
+        ),
     ),
     "reversal_spikes": (
         _p(
@@ -156,7 +180,7 @@ EFFECT_PARAMETERS = {
             "peak_x_m_s2",
             "m/s²",
             1.0,
-            0.0,
+            -1.0,
             1.0,
             0.02,
             SIZE,
@@ -168,12 +192,27 @@ EFFECT_PARAMETERS = {
             "peak_y_m_s2",
             "m/s²",
             1.0,
-            0.0,
+            -1.0,
             1.0,
             0.02,
             SIZE,
             "machine",
             "spike_y_m_s2",
+        ),
+        _p(
+            "reversal_spikes",
+            "onset_tau",
+            "",
+            1.0,
+            -6.0,
+            3.0,
+            0.0,
+            SHAPE,
+            "machine",
+            "spike_onset",
+            # after the reversal, centred on it, leading it; declared before the width,
+            # so that a coarse scan of the product grid steps through widths
+            scan=(0.0, -2.0, -4.0),
         ),
         _p(
             "reversal_spikes",
@@ -186,12 +225,12 @@ EFFECT_PARAMETERS = {
             SHAPE,
             "machine",
             "spike_tau_s",
-            scan=(5.0, 10.0, 20.0, 40.0, 80.0),
+            scan=(5.0, 7.0, 10.0, 14.0, 20.0, 28.0, 40.0, 56.0, 80.0),
         ),
     ),
     "backlash": (
-        _p("backlash", "x_um", "µm", UM, 0.0, 100.0, 5.0, SIZE, "machine", "backlash_x_m"),
-        _p("backlash", "y_um", "µm", UM, 0.0, 100.0, 5.0, SIZE, "machine", "backlash_y_m"),
+        _p("backlash", "x_um", "µm", UM, -100.0, 100.0, 5.0, SIZE, "machine", "backlash_x_m"),
+        _p("backlash", "y_um", "µm", UM, -100.0, 100.0, 5.0, SIZE, "machine", "backlash_y_m"),
         _p(
             "backlash",
             "take_up_ms",
@@ -204,6 +243,19 @@ EFFECT_PARAMETERS = {
             "machine",
             "backlash_take_up_s",
             scan=(2.0, 5.0, 10.0, 20.0),
+        ),
+        _p(
+            "backlash",
+            "onset",
+            "",
+            1.0,
+            -3.0,
+            6.0,
+            0.0,
+            SHAPE,
+            "machine",
+            "backlash_onset",
+            scan=(0.0, 2.0),  # centred on the reversal; starting at it
         ),
     ),
     "scale_mismatch": (
@@ -256,6 +308,19 @@ EFFECT_PARAMETERS = {
             SIZE,
             "machine",
             "geometry.straightness_y_m",
+        ),
+        # Chapman's machine 7: a quartic part Q (2 x / L)^4 of the X axis's form
+        _p(
+            "straightness_yaw",
+            "x_quartic_um",
+            "µm",
+            UM,
+            -1000.0,
+            1000.0,
+            0.0,
+            SIZE,
+            "machine",
+            "geometry.straightness_x_quartic_m",
         ),
         _p(
             "straightness_yaw",

@@ -57,7 +57,7 @@ def servo_response(omega_rad_s, tau_s, model):
     return 1.0 / math.sqrt(1.0 + x * x), math.atan(x) / omega_rad_s
 
 
-def _servo_path(timeline, t, axis, tau, model):
+def servo_path(timeline, t, axis, tau, model):
     """Commanded axis path through the servo, and the delay of each block's span."""
     if model == "pure_lag":
         return list(timeline.axis_path(t - tau, axis)), [(0.0, tau)]
@@ -108,12 +108,14 @@ def carriage_motion(timeline, machine, t):
     )
     paths = []
     for axis, (tau, lost, spike, vibration) in enumerate(per_axis):
-        p, delays = _servo_path(timeline, t, axis, tau, m.servo_model)
+        p, delays = servo_path(timeline, t, axis, tau, m.servo_model)
         if lost or spike or vibration:
             times, directions, initial = timeline.reversals(axis)
             times = times + reversal_delays(times, delays)
-            add_backlash(p, t, times, directions, initial, lost, m.backlash_take_up_s)
-            add_spikes(p, t, times, directions, spike, m.spike_tau_s)
+            add_backlash(
+                p, t, times, directions, initial, lost, m.backlash_take_up_s, m.backlash_onset
+            )
+            add_spikes(p, t, times, directions, spike, m.spike_tau_s, m.spike_onset)
             add_vibration(p, t, times, directions, vibration, m.vibration_hz, m.vibration_damping)
         paths.append(p)
     return m.geometry.apply(paths[0], paths[1], t)

@@ -32,14 +32,16 @@ A machine file (all sections optional; absent = ideal)::
     model = "pure_lag"            # or "first_order": 1/(1 + s tau), shrinks the circle
 
     [backlash]
-    x_um = 0.0
+    x_um = 0.0                    # negative: over-compensated (the table is thrown ahead)
     y_um = 0.0
     take_up_ms = 5.0
+    onset = 0.0                   # centre of the take-up after the reversal, in take-up times
 
     [reversal_spikes]
-    peak_x_m_s2 = 0.0             # peak of the acceleration bump
+    peak_x_m_s2 = 0.0             # peak of the acceleration bump (negative: inward)
     peak_y_m_s2 = 0.0
     tau_ms = 20.0
+    onset_tau = 0.0               # its start after the reversal, in tau (-2: centred, < -2: led)
 
     [structural_vibration]
     accel_x_m_s2 = 0.0
@@ -86,13 +88,23 @@ class MachineModel:
         ``"pure_lag"`` or ``"first_order"``
         (:mod:`imu_square.simulate.kinematics`).
     backlash_x_m, backlash_y_m : float
-        Lost motion of each axis. [m]
+        Lost motion of each axis; negative when the control's compensation
+        exceeds it (the table is thrown ahead at a reversal). [m]
     backlash_take_up_s : float
         Time constant of the take-up. [s]
+    backlash_onset : float
+        Centre of the take-up after the reversal, in units of
+        ``backlash_take_up_s`` (0: centred on it; 2 or more: it starts there).
     spike_x_m_s2, spike_y_m_s2 : float
-        Peak acceleration of the friction bump after a reversal. [m/s^2]
+        Peak acceleration of the friction bump at a reversal; positive outward
+        (the axis lags its new direction), negative inward (an over-set
+        friction compensation). [m/s^2]
     spike_tau_s : float
         Time constant of the bump. [s]
+    spike_onset : float
+        Start of the bump relative to the reversal, in units of
+        ``spike_tau_s``: 0 starts at the reversal (after it), -2 puts its
+        position peak on the reversal (centred), below that it leads.
     vibration_x_m_s2, vibration_y_m_s2 : float
         Initial acceleration of the oscillation excited at a reversal. [m/s^2]
     vibration_hz : float
@@ -114,9 +126,11 @@ class MachineModel:
     backlash_x_m: float = 0.0
     backlash_y_m: float = 0.0
     backlash_take_up_s: float = 0.005
+    backlash_onset: float = 0.0
     spike_x_m_s2: float = 0.0
     spike_y_m_s2: float = 0.0
     spike_tau_s: float = 0.02
+    spike_onset: float = 0.0
     vibration_x_m_s2: float = 0.0
     vibration_y_m_s2: float = 0.0
     vibration_hz: float = 40.0
@@ -158,12 +172,14 @@ class MachineModel:
                 "backlash_x_m": self.backlash_x_m,
                 "backlash_y_m": self.backlash_y_m,
                 "take_up_s": self.backlash_take_up_s,
+                "onset": self.backlash_onset,
             }
         if self.spike_x_m_s2 or self.spike_y_m_s2:
             out["reversal_spikes"] = {
                 "peak_x_m_s2": self.spike_x_m_s2,
                 "peak_y_m_s2": self.spike_y_m_s2,
                 "tau_s": self.spike_tau_s,
+                "onset_tau": self.spike_onset,
             }
         if self.vibration_x_m_s2 or self.vibration_y_m_s2:
             out["structural_vibration"] = {
@@ -204,8 +220,8 @@ _LAYOUT = {
         "yaw_y": False,
     },
     "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0, "model": "pure_lag"},
-    "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0},
-    "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0},
+    "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0, "onset": 0.0},
+    "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0, "onset_tau": 0.0},
     "structural_vibration": {
         "accel_x_m_s2": 0.0,
         "accel_y_m_s2": 0.0,
@@ -293,12 +309,14 @@ def machine_from_mapping(doc, source="<machine>"):
         tau_x_s=servo.number("tau_x_ms", 0.0, 1e3) * MS,
         tau_y_s=servo.number("tau_y_ms", 0.0, 1e3) * MS,
         servo_model=servo.choice("model", SERVO_MODELS),
-        backlash_x_m=backlash.number("x_um", 0.0, 1e3) * UM,
-        backlash_y_m=backlash.number("y_um", 0.0, 1e3) * UM,
+        backlash_x_m=backlash.number("x_um", -1e3, 1e3) * UM,
+        backlash_y_m=backlash.number("y_um", -1e3, 1e3) * UM,
         backlash_take_up_s=backlash.number("take_up_ms", 0.0, 1e3, lo_open=True) * MS,
-        spike_x_m_s2=spikes.number("peak_x_m_s2", 0.0, 100.0),
-        spike_y_m_s2=spikes.number("peak_y_m_s2", 0.0, 100.0),
+        backlash_onset=backlash.number("onset", -10.0, 10.0),
+        spike_x_m_s2=spikes.number("peak_x_m_s2", -100.0, 100.0),
+        spike_y_m_s2=spikes.number("peak_y_m_s2", -100.0, 100.0),
         spike_tau_s=spikes.number("tau_ms", 0.0, 1e3, lo_open=True) * MS,
+        spike_onset=spikes.number("onset_tau", -10.0, 10.0),
         vibration_x_m_s2=vibration.number("accel_x_m_s2", -100.0, 100.0),
         vibration_y_m_s2=vibration.number("accel_y_m_s2", -100.0, 100.0),
         vibration_hz=vibration.number("frequency_hz", 0.0, 1e4, lo_open=True),

@@ -18,7 +18,7 @@ and clipping, sample for sample (``tests/test_simulate_effects.py`` checks).
 """
 
 from imu_square.simulate.drive import add_backlash, add_spikes, add_vibration
-from imu_square.simulate.kinematics import carriage_tilt
+from imu_square.simulate.kinematics import carriage_tilt, reversal_delays, servo_path
 from imu_square.simulate.trajectory import build_timeline
 
 
@@ -65,8 +65,11 @@ def axis_parameters(machine, axis):
     )
     return (
         *own,
+        m.servo_model,
         m.backlash_take_up_s,
+        m.backlash_onset,
         m.spike_tau_s,
+        m.spike_onset,
         m.vibration_hz,
         m.vibration_damping,
     )
@@ -91,13 +94,15 @@ def axis_motion(timeline, machine, t_s, axis):
     list of 3 ndarray
         [m, m/s, m/s^2]
     """
-    tau, lost, spike, vibration, take_up, spike_tau, hz, damping = axis_parameters(machine, axis)
-    p = list(timeline.axis_path(t_s - tau, axis))
+    tau, lost, spike, vibration, _, take_up, take_up_onset, spike_tau, onset, hz, damping = (
+        axis_parameters(machine, axis)
+    )
+    p, delays = servo_path(timeline, t_s, axis, tau, machine.servo_model)
     if lost or spike or vibration:
         times, directions, initial = timeline.reversals(axis)
-        times = times + tau
-        add_backlash(p, t_s, times, directions, initial, lost, take_up)
-        add_spikes(p, t_s, times, directions, spike, spike_tau)
+        times = times + reversal_delays(times, delays)
+        add_backlash(p, t_s, times, directions, initial, lost, take_up, take_up_onset)
+        add_spikes(p, t_s, times, directions, spike, spike_tau, onset)
         add_vibration(p, t_s, times, directions, vibration, hz, damping)
     return p
 

@@ -80,6 +80,7 @@ def machine_to_toml(machine, header=""):
                 "x_um": m.backlash_x_m / UM,
                 "y_um": m.backlash_y_m / UM,
                 "take_up_ms": m.backlash_take_up_s / MS,
+                "onset": m.backlash_onset,
             },
         ),
         (
@@ -88,6 +89,7 @@ def machine_to_toml(machine, header=""):
                 "peak_x_m_s2": m.spike_x_m_s2,
                 "peak_y_m_s2": m.spike_y_m_s2,
                 "tau_ms": m.spike_tau_s / MS,
+                "onset_tau": m.spike_onset,
             },
         ),
         (
