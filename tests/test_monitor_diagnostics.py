@@ -234,3 +234,14 @@ def test_replay_rebuilds_an_archives_diagnostics_locally_and_on_dask(tmp_path, c
     # everything stored: a second replay skips every file
     assert main(["replay", "--config", str(config), str(archive)]) == 0
     assert "4 skipped" in capsys.readouterr().out
+
+
+def test_every_diagnostic_is_made_of_sizes_its_effect_declares():
+    from imu_square.monitor.diagnostics.catalog import CATALOG
+    from imu_square.simulate.effects import SIZE, effect_parameters
+
+    for effect, diagnostics in CATALOG.items():
+        sizes = {p.name for p in effect_parameters(effect) if p.role == SIZE}
+        for d in diagnostics:
+            assert d.effect == effect and d.alarm_field == f"{d.name}_{d.suffix}"
+            assert {name for name, _ in d.terms} <= sizes, (d.name, sizes)

@@ -4,7 +4,7 @@ Each :class:`Diagnostic` is a linear combination of the sizes of one effect of
 the simulator's vocabulary (:mod:`imu_square.simulate.effects`), the fit's
 names for them (``imu-square discrepancy`` prints the same). This table is
 the only place that ties the two: an effect renamed or a parameter added
-there is changed here, and ``tests/test_diagnostics_fit.py`` checks every term
+there is changed here, and ``tests/test_monitor_diagnostics.py`` checks every term
 against the declarations.
 
 The values are stored in SI (``si_unit``) and shown in ``unit``; the monitor
