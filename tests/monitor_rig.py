@@ -36,7 +36,14 @@ SENSOR = SensorModel(
 )
 ALPHA = 20e-6
 START = datetime(2026, 9, 1, 2, 30, tzinfo=UTC)
-MONITOR = """\
+# The nightly diagnostics (on by default) have their own tests (test_monitor_diagnostics.py):
+# the monitor's other tests do without their fit's second a night.
+NO_DIAGNOSTICS = """
+[diagnostics]
+effects = []
+"""
+MONITOR = (
+    """\
 [monitor]
 machine_id = "m1"
 history = "history.db"
@@ -57,6 +64,8 @@ monte_carlo_nights = 200000
 path = "data/alert.json"
 states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]
 """
+    + NO_DIAGNOSTICS
+)
 
 
 def night(folder, day, alpha=ALPHA, sensor=SENSOR, seed=None):

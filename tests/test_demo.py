@@ -55,3 +55,17 @@ def test_the_demo_night_ends_in_a_verdict_a_chart_and_a_report(tmp_path, capsys)
     assert since(records[demo.BASELINE_NIGHTS]) < since(records[-1]) == since(tonight)
     warming = records[demo.COLD_NIGHTS[0]]["verdict"]
     assert "warming up" in warming, warming
+
+    # every valid night's diagnostics; the X backlash wears 1 µm a week (a trend the
+    # diagnostics see night by night) and its own alarm fires while the squareness is ok
+    backlash = [
+        (i, r["diagnostics"]["backlash_x"]) for i, r in enumerate(records) if r["diagnostics"]
+    ]
+    assert len(backlash) >= demo.NIGHTS - len(demo.COLD_NIGHTS)
+    for i, b in backlash:
+        worn = demo.BACKLASH_X_UM + demo.BACKLASH_WEAR_UM_PER_WEEK * i / 7
+        assert b["value"] == pytest.approx(worn, abs=0.2), (i, b)
+    fired = [i for i, r in enumerate(records) if "backlash_x" in r["diagnostic_alarms"]]
+    assert fired and states[fired[0]] == "ok"
+    assert "backlash_x" in tonight["diagnostic_alarms"]
+    assert (data / f"{demo.MACHINE_ID}-diagnostics.png").stat().st_size > 10_000

@@ -15,7 +15,12 @@ from imu_square.errors import HistoryError
 from imu_square.monitor.history import schema
 from imu_square.monitor.history.encoding import canonical_json
 from imu_square.monitor.history.postgres import PostgresBackend
-from imu_square.monitor.history.rows import EvaluationRow, OutboxRow
+from imu_square.monitor.history.rows import (
+    DiagnosticFitRow,
+    DiagnosticRow,
+    EvaluationRow,
+    OutboxRow,
+)
 from imu_square.monitor.history.sql import Params
 from imu_square.monitor.history.sqlite import SqliteBackend
 from imu_square.monitor.history.store import RUNS, is_postgres_url, open_history
@@ -136,6 +141,80 @@ def test_a_version_3_history_gets_an_empty_outbox_and_keeps_its_runs(location):
         outbox_id = h.add_alert(alert)
         (got,) = h.outbox(MACHINE)
         assert got == dataclasses.replace(alert, id=outbox_id, updated_at_ns=got.updated_at_ns)
+
+
+def test_a_version_4_history_gets_empty_diagnostics_and_keeps_its_runs_and_baseline(location):
+    db = _backend(location)
+    assert schema.migrate(db, target=4) == 4
+    assert "diagnostic_fits" not in db.tables()
+    assert "diagnostic_designs_json" not in db.columns("baselines")
+    row = run_for(1)
+    design = {"sigma_rad": 2.5e-6}
+    with db.transaction(write=True):
+        run_id = _insert(db, "runs", RUNS.values(row))
+        base = _insert(
+            db,
+            "baselines",
+            {
+                "machine_id": MACHINE,
+                "created_at_ns": 5,
+                "settings_hash": row.settings_hash,
+                "squareness_mean_rad": 1e-5,
+                "u_squareness_mean_rad": 1e-6,
+                "stale": False,
+                "note": "",
+                "alarm_design_json": canonical_json(design),
+            },
+        )
+        p = Params(db.mark)
+        db.execute(
+            f"INSERT INTO baseline_runs (baseline_id, run_id) VALUES ({p.list((base, run_id))})",
+            p.values,
+        )
+    db.close()
+
+    with open_history(location) as h:
+        assert h.schema_version == schema.latest_version()
+        assert h.runs(MACHINE) == [dataclasses.replace(row, id=run_id)]
+        baseline = h.current_baseline(MACHINE)
+        assert baseline.alarm_design == design and baseline.run_ids == (run_id,)
+        # the old nights have no diagnostics: a replay fits them (test_monitor_diagnostics)
+        assert baseline.diagnostic_designs == {}
+        assert h.diagnostic_fits(MACHINE, "0" * 64) == {}
+        fit = DiagnosticFitRow(
+            run_id=run_id,
+            settings={"effects": ["backlash"]},
+            seconds=0.5,
+            fit={"rss": 1.0},
+            values=(
+                DiagnosticRow(name="backlash_x", unit="m", value=2e-6, u_value=1e-9),
+                DiagnosticRow(name="backlash_y", unit="m", missing_reason="not identifiable"),
+            ),
+        )
+        fit_id, inserted = h.add_diagnostic_fit(fit)
+        assert inserted and h.add_diagnostic_fit(fit) == (fit_id, False)  # kept as it was
+        (got,) = h.diagnostic_fits(MACHINE, fit.settings_hash).values()
+        assert got.values == tuple(
+            dataclasses.replace(v, id=got.values[i].id, fit_id=fit_id)
+            for i, v in enumerate(fit.values)
+        )
+        assert got.failure is None and got.fit == {"rss": 1.0}
+        # a replay skips the recording now that its valid run has a fit under these settings
+        assert h.diagnosed_hashes(MACHINE, row.settings_hash, fit.settings_hash) == {
+            row.recording_sha256
+        }
+        assert h.diagnosed_hashes(MACHINE, row.settings_hash, "0" * 64) == set()
+        h.set_diagnostic_designs(base, {"backlash_x": {"key": "k"}})
+        assert h.current_baseline(MACHINE).diagnostic_designs == {"backlash_x": {"key": "k"}}
+        # a stored diagnostic with neither a value nor a reason is refused by the database
+        with pytest.raises(Exception, match=r"(?i)check|constraint"):
+            with h.transaction():
+                p = Params(h._db.mark)
+                h._db.execute(
+                    "INSERT INTO diagnostics (fit_id, name, unit) VALUES "
+                    f"({p.list((fit_id, 'scale_x', '1'))})",
+                    p.values,
+                )
 
 
 def test_a_failed_migration_leaves_the_history_unchanged(location, monkeypatch):

@@ -97,8 +97,8 @@ OWN = MINIMAL + 'history = "h.db"\n'  # a file read right is no reason to touch 
         # the sections sorted, as every file lists its sections and fields
         (
             OWN + "[sensr]\n",
-            "unknown section [sensr]; allowed: ['alarms', 'alerts', 'analysis', 'emulated', "
-            "'metrics', 'monitor', 'program', 'sensor']",
+            "unknown section [sensr]; allowed: ['alarms', 'alerts', 'analysis', 'diagnostics', "
+            "'emulated', 'metrics', 'monitor', 'program', 'sensor']",
         ),
     ],
 )

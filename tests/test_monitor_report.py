@@ -61,7 +61,7 @@ def test_report_is_self_contained_and_renders_in_a_real_browser(machine, tmp_pat
     for section in SECTIONS:
         assert f'<section id="{section}">' in html
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', html)
-    assert len(images) == 3  # trend, last run (Fig. 5), sensor
+    assert len(images) == 3  # trend, last run (Fig. 5), sensor (the rig fits no diagnostics)
     for data in images:
         png = base64.b64decode(data)
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 20_000

@@ -45,6 +45,10 @@ bootstrap = 0
 
 [alarms]
 monte_carlo_nights = 200000
+
+# a replay's diagnostics: tests/test_monitor_diagnostics.py (here 300 fits would cost minutes)
+[diagnostics]
+effects = []
 """
 
 

@@ -113,6 +113,7 @@ _.analysed_at_ns
 _.claimed_by
 _.claimed_until_ns
 _.updated_at_ns
+_.fitted_at_ns
 # monitor.history: the schema's version, every table's columns and the machines of a
 # central history, for a user's own scripts (and the tests that check the schema).
 _.latest_version

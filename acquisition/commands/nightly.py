@@ -343,7 +343,11 @@ def run_monitor(args, config=None):
             files = write_night_outputs(config, history, outcome, out)
     except HistoryError as exc:
         return _kept_for_later(config, args, out, path, exc)
-    for name, value in (("trend chart", files.trend_png), ("report", files.report_html)):
+    for name, value in (
+        ("trend chart", files.trend_png),
+        ("diagnostics chart", files.diagnostics_png),
+        ("report", files.report_html),
+    ):
         if value is not None:
             print(f"wrote the {name} {value}", file=sys.stderr)
     if files.alerts is not None:

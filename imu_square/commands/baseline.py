@@ -119,6 +119,7 @@ def run_set(args):
         raise ImuSquareError("give the baseline's runs (RUN...) or --last N, one of the two")
     with monitor_session(args.config) as (config, history):
         program = config.test_program()
+        diagnostics = {}
         if args.last is not None:
             valid = history.runs(config.machine_id, valid_only=True)
             if args.last < 1 or args.last > len(valid):
@@ -128,9 +129,9 @@ def run_set(args):
                 )
             runs = valid[-args.last :]
         else:
-            runs = runs_for_baseline(config, history, args.runs, program)
+            runs, diagnostics = runs_for_baseline(config, history, args.runs, program)
         print("setting the baseline and designing its alarm charts ...", file=sys.stderr)
-        row = set_baseline(config, history, runs, note=args.note)
+        row = set_baseline(config, history, runs, note=args.note, diagnostics=diagnostics)
         design = stored_design(history, row, config.alarms)
         print(_describe(row, design), file=result_stream(args))
         if args.json:

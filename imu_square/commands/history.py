@@ -19,10 +19,12 @@ def register(sub):
         "history",
         help=HELP,
         description="Print the machine's runs with the monitor's verdict on each (against the "
-        "current baseline), or write them as JSON, or draw the trend chart with the alarm "
-        "limits, the baseline band, anchors, remounts and invalid runs marked. --backup copies "
-        "the whole history safely while it is in use (SQLite's backup API; pg_dump for "
-        "PostgreSQL).",
+        "current baseline), then each night's diagnostics (value ± its uncertainty; ! past a "
+        "diagnostic's alarm limit, ? past its warning limit), or write them as JSON, or draw "
+        "the trend chart with the alarm limits, the baseline band, anchors, remounts and "
+        "invalid runs marked, and beside it the diagnostics' chart (OUT-diagnostics.png). "
+        "--backup copies the whole history safely while it is in use (SQLite's backup API; "
+        "pg_dump for PostgreSQL).",
     )
     add_config_argument(p)
     p.add_argument("--json", action="store_true", help="one JSON object per run on stdout")
@@ -100,13 +102,40 @@ def run(args):
             )
             if args.json:
                 print(json.dumps(night_record(assessment, n, verdict(assessment, n))))
-        if args.plot:
-            from imu_square.monitor.report.figures import plot_trend
+        from imu_square.monitor.diagnostics.text import table_lines
 
-            shown = assessment if start is None else replace(assessment, nights=tuple(nights))
-            plot_trend(shown, args.plot)
-            print(f"wrote {args.plot}", file=sys.stderr)
+        lines = table_lines(assessment.diagnostics, [n.run for n in nights])
+        if lines:
+            print("\ndiagnostics", file=result_stream(args))
+        for line in lines:
+            print(line, file=result_stream(args))
+        if args.plot:
+            _plot(assessment, nights, start, args.plot)
     return 0
+
+
+def _plot(assessment, nights, start, path):
+    """The trend chart, and the diagnostics' beside it (``OUT-diagnostics.png``)."""
+    from pathlib import Path
+
+    from imu_square.monitor.report.diagnostics_figure import plot_diagnostics
+    from imu_square.monitor.report.figures import plot_trend
+
+    shown = assessment
+    if start is not None:
+        runs = {n.run.id for n in nights}
+        trends = tuple(
+            replace(t, nights=tuple(n for n in t.nights if n.run.id in runs))
+            for t in assessment.diagnostics
+        )
+        shown = replace(assessment, nights=tuple(nights), diagnostics=trends)
+    plot_trend(shown, path)
+    print(f"wrote {path}", file=sys.stderr)
+    if shown.diagnostics:
+        path = Path(path)
+        beside = path.with_name(f"{path.stem}-diagnostics{path.suffix}")
+        plot_diagnostics(shown, beside)
+        print(f"wrote {beside}", file=sys.stderr)
 
 
 def _compare(args):

@@ -108,6 +108,7 @@ def run(args):
         run_dask,
         run_local,
         store_outcome,
+        stored_hashes,
     )
 
     config = read_monitor(args.config)
@@ -119,7 +120,7 @@ def run(args):
         config = replace(config, history=args.into)
     paths = expand_paths(args.paths)
     program = config.test_program()
-    job = ReplayJob(config.machine_id, config.analysis, program)
+    job = ReplayJob(config.machine_id, config.analysis, program, config.diagnostics)
     if args.dry_run:
         print(
             f"would replay {len(paths)} recording(s) of machine {config.machine_id} into "
@@ -129,15 +130,10 @@ def run(args):
         for p in paths:
             print(p)
         return 0
-    from imu_square.monitor.history.encoding import settings_hash
-    from imu_square.monitor.night import analysis_settings
-
     summary = ReplaySummary(files=len(paths))
     start = time.monotonic()
     with config.open_history() as history:
-        known = frozenset(
-            history.recording_hashes(config.machine_id, settings_hash(analysis_settings(config)))
-        )
+        known = stored_hashes(history, config)
         if args.scheduler or args.cluster:
             outcomes = run_dask(paths, job, known, scheduler=args.scheduler, workers=args.jobs or 2)
         else:

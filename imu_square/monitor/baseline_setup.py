@@ -12,7 +12,7 @@ import math
 
 from imu_square.errors import ImuSquareError, MonitorError, step
 from imu_square.monitor.history.rows import AnchorRow, BaselineRow
-from imu_square.monitor.night import recording_row
+from imu_square.monitor.night import recording_row, store_run
 from imu_square.monitor.stats.baseline import BaselineError, compute_baseline
 from imu_square.monitor.verdict import design_for, run_value
 from imu_square.units import MM, URAD
@@ -37,10 +37,13 @@ def runs_for_baseline(config, history, items, program=None):
 
     Returns
     -------
-    list of RunRow
+    runs : list of RunRow
         Stored runs, and new ones (``id`` None) that :func:`set_baseline`
         stores with the baseline, in one transaction: a refused baseline
         stores nothing.
+    diagnostics : dict of str to DiagnosticFitRow
+        The diagnostic fits of the recordings given, by SHA-256, for
+        :func:`set_baseline` to store with their runs.
 
     Raises
     ------
@@ -51,7 +54,7 @@ def runs_for_baseline(config, history, items, program=None):
 
     from imu_square.errors import HistoryError
 
-    rows = []
+    rows, diagnostics = [], {}
     for item in items:
         if item.isdigit():
             try:
@@ -60,7 +63,9 @@ def runs_for_baseline(config, history, items, program=None):
                 raise BaselineError(f"run {item} is not in the history") from None
         else:
             path = Path(item).absolute()
-            row, _ = recording_row(config, path, program)
+            row, _, fit = recording_row(config, path, program)
+            if fit is not None:
+                diagnostics[row.recording_sha256] = fit
             stored = history.run_by_hash(config.machine_id, row.recording_sha256, row.settings_hash)
             row = stored or row
         where = row.recording_path if row.id is None else f"run {row.id} ({row.recording_path})"
@@ -73,10 +78,10 @@ def runs_for_baseline(config, history, items, program=None):
                 f"{where} is invalid ({row.invalid_reason}): an invalid run never enters a baseline"
             )
         rows.append(row)
-    return rows
+    return rows, diagnostics
 
 
-def set_baseline(config, history, runs, note=""):
+def set_baseline(config, history, runs, note="", diagnostics=None):
     """Compute, store and design the baseline of valid runs.
 
     Parameters
@@ -90,12 +95,15 @@ def set_baseline(config, history, runs, note=""):
         stored with the baseline, in one transaction.
     note : str
         Free text kept with it.
+    diagnostics : dict of str to DiagnosticFitRow, optional
+        Diagnostic fits to store with the runs, by their recordings' SHA-256.
 
     Returns
     -------
     BaselineRow
         As stored, with its alarm design.
     """
+    diagnostics = diagnostics or {}
     keys = [r.recording_sha256 for r in runs]
     if len(set(keys)) != len(keys):
         raise BaselineError("the same recording is given twice: a baseline needs distinct runs")
@@ -104,7 +112,12 @@ def set_baseline(config, history, runs, note=""):
     with step("designing the alarm charts", MonitorError):
         design = design_for(stats.eps_c_rad, stats.u_squareness_rad, runs, config.alarms)
     with history.transaction():
-        ids = tuple(r.id if r.id is not None else history.add_run(r)[0] for r in runs)
+        ids = tuple(
+            store_run(history, r, diagnostics.get(r.recording_sha256))[0]
+            if r.id is None or r.recording_sha256 in diagnostics
+            else r.id
+            for r in runs
+        )
         baseline_id = history.add_baseline(
             BaselineRow(
                 machine_id=config.machine_id,

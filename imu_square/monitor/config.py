@@ -36,6 +36,7 @@ file, as ``imu-square init`` writes it::
     step_um_per_m = 10.0         # the change to detect, for the out-of-control run length
     monte_carlo_nights = 4000000 # nights simulated to check the design
 
+    [diagnostics] ...            # imu_square.monitor.diagnostics.settings
     [alerts] ...                 # imu_square.monitor.alerts.config
     [metrics] ...                # imu_square.monitor.report.metrics
 
@@ -47,6 +48,7 @@ from pathlib import Path
 
 from imu_square.errors import MonitorConfigError
 from imu_square.monitor.alerts.config import AlertsConfig, alerts_from_mapping
+from imu_square.monitor.diagnostics.settings import DiagnosticSettings, diagnostics_from_mapping
 from imu_square.monitor.report.metrics import MetricsConfig, metrics_from_mapping
 from imu_square.textfile import read_toml
 from imu_square.units import URAD
@@ -61,6 +63,7 @@ SECTIONS = (
     "program",
     "analysis",
     "alarms",
+    "diagnostics",
     "alerts",
     "metrics",
 )
@@ -230,6 +233,8 @@ class MonitorConfig:
         The program file; None for the paper's test.
     analysis : AnalysisSettings
     alarms : AlarmSettings
+    diagnostics : DiagnosticSettings
+        The effects fitted after every valid night, and the diagnostics' alarms.
     alerts : AlertsConfig
     metrics : MetricsConfig or None
     """
@@ -244,6 +249,7 @@ class MonitorConfig:
     program: Path | None = None
     analysis: AnalysisSettings = field(default_factory=AnalysisSettings)
     alarms: AlarmSettings = field(default_factory=AlarmSettings)
+    diagnostics: DiagnosticSettings = field(default_factory=DiagnosticSettings)
     alerts: AlertsConfig = field(default_factory=AlertsConfig)
     metrics: MetricsConfig | None = None
 
@@ -388,6 +394,7 @@ def monitor_from_mapping(doc, path):
         program=program,
         analysis=analysis,
         alarms=alarms,
+        diagnostics=diagnostics_from_mapping(doc.get("diagnostics"), source),
         alerts=alerts_from_mapping(doc.get("alerts"), source, base),
         metrics=metrics,
     )

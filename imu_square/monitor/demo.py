@@ -16,11 +16,16 @@ the machine's past nights, generated afresh (never committed):
 - a crash that moves the squareness by +45 µm/m: the alarm fires and stands;
 - a repair five nights later that brings it back within 2 µm/m, after which
   the maintenance team sets a new baseline from five nights;
-- one night whose recording was cut short, stored as invalid with its reason.
+- one night whose recording was cut short, stored as invalid with its reason;
+- all along, the X axis's backlash wears from 3 µm by 1 µm a week: every
+  night's diagnostics (:mod:`imu_square.monitor.diagnostics`) trend it, and
+  its own alarm (2 µm, in the monitor file's ``[diagnostics.alarms]``) fires
+  while the squareness is ``ok``.
 
 Tonight is then recorded through the emulated board like any night.
 """
 
+import os
 import shutil
 import tomllib
 from datetime import UTC, datetime, timedelta
@@ -28,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import read_monitor
 
 MACHINE_ID = "demo-mill"
@@ -43,6 +49,8 @@ CUT_NIGHT = 36
 COLD_NIGHTS = (11, 15, 19, 35, 38, 40)
 WARM_UPTIME_S = 5 * 3600.0
 COLD_UPTIME_S = 30.0
+BACKLASH_X_UM = 3.0
+BACKLASH_WEAR_UM_PER_WEEK = 1.0
 
 _PROGRAM = """\
 # The demo's warm-up cycle: r = 25 mm at 9000 mm/min (omega = 6 rad/s, 0.9 m/s^2).
@@ -100,6 +108,9 @@ file = "program.toml"
 false_alarm_nights = 730
 step_um_per_m = 30.0
 
+[diagnostics.alarms]
+backlash_x_um = 2.0
+
 [alerts.json_file]
 path = "data/latest-alert.json"
 mode = "latest"
@@ -110,11 +121,13 @@ textfile = "data/{machine_id}.prom"
 """
 
 
-def _machine_text(alpha_um_per_m):
+def _machine_text(alpha_um_per_m, night):
     from imu_square.simulate import data_path
 
     text = Path(data_path("machine_typical.toml")).read_text(encoding="utf-8")
     text = text.replace('name = "typical"', f'name = "{MACHINE_ID}"')
+    backlash = BACKLASH_X_UM + BACKLASH_WEAR_UM_PER_WEEK * night / 7
+    text = text.replace("[backlash]\nx_um = 3.0", f"[backlash]\nx_um = {backlash:.3f}")
     return text.replace(
         "machine_squareness_um_per_m = 15.0", f"machine_squareness_um_per_m = {alpha_um_per_m}"
     )
@@ -146,7 +159,7 @@ def write_demo_files(folder):
         "monitor.toml": _MONITOR.format(machine_id=MACHINE_ID),
         "program.toml": _PROGRAM,
         "sensor.toml": _SENSOR,
-        "machine.toml": _machine_text(REPAIRED_UM_PER_M),
+        "machine.toml": _machine_text(REPAIRED_UM_PER_M, NIGHTS),
     }
     for name, text in files.items():
         if not (folder / name).exists():
@@ -173,7 +186,9 @@ def seed_history(config, history, now=None, progress=None, motion=None):
     """
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.baseline_setup import set_baseline
-    from imu_square.monitor.night import judge_recording, recording_row
+    from imu_square.monitor.history.rows import RunRow
+    from imu_square.monitor.night import judge_recording, store_run
+    from imu_square.monitor.replay import ReplayJob, run_local
     from imu_square.simulate import read_sensor, simulate_run
     from imu_square.simulate.machine import machine_from_mapping
 
@@ -186,9 +201,9 @@ def seed_history(config, history, now=None, progress=None, motion=None):
     first = (now - timedelta(days=NIGHTS)).replace(hour=2, minute=30, second=0, microsecond=0)
     rng = np.random.default_rng(20261124)
     say(f"seeding {NIGHTS} past nights of {MACHINE_ID} from the simulator into {history.location}")
-    baseline_runs, repaired = [], []
+    paths, whens = [], []
     for night in range(NIGHTS):
-        machine = machine_from_mapping(tomllib.loads(_machine_text(_alpha(night))), "demo")
+        machine = machine_from_mapping(tomllib.loads(_machine_text(_alpha(night), night)), "demo")
         when = first + timedelta(days=night, minutes=float(rng.uniform(0, 20)))
         uptime = COLD_UPTIME_S if night in COLD_NIGHTS else WARM_UPTIME_S
         recording, _ = simulate_run(
@@ -209,16 +224,29 @@ def seed_history(config, history, now=None, progress=None, motion=None):
             recording.events = [e for e in recording.events if e.time_ns <= recording.time_ns[-1]]
         path = folder / f"{MACHINE_ID}-{when:%Y%m%d-%H%M}.mcap"
         write_mcap(recording, path)
+        paths.append(str(path))
+        whens.append(when)
+    # every night's analysis and diagnostic fit over the cores (a replay's per-file work),
+    # then the nights judged in order as each came
+    say(f"analysing them and fitting their diagnostics on {os.cpu_count() or 1} core(s)")
+    job = ReplayJob(config.machine_id, config.analysis, program, config.diagnostics)
+    made = {}
+    for outcome in run_local(paths, job):
+        if outcome.row is None:
+            raise ImuSquareError(f"{outcome.path}: {outcome.reason}")
+        made[outcome.path] = (RunRow(**outcome.row), None, outcome.diagnostics)
+    baseline_runs, repaired = [], []
+    for night, path in enumerate(paths):
         if night < BASELINE_NIGHTS:
-            run_id, _ = history.add_run(recording_row(config, path, program)[0])
+            run_id, _ = store_run(history, made[path][0], made[path][2])
             baseline_runs.append(history.run(run_id))
             if night == BASELINE_NIGHTS - 1:
                 say("setting the baseline from the first 8 nights and designing its alarms")
                 set_baseline(config, history, baseline_runs, note="demo: eight warm nights")
             continue
-        outcome = judge_recording(config, history, path, program)
+        outcome = judge_recording(config, history, path, program, made=made[path])
         if outcome.state != "ok":
-            say(f"  {when:%Y-%m-%d}: {outcome.verdict}")
+            say(f"  {whens[night]:%Y-%m-%d}: {outcome.verdict}")
         if night in NEW_BASELINE_NIGHTS:
             repaired.append(history.run(outcome.run_id))
             if night == NEW_BASELINE_NIGHTS[-1]:

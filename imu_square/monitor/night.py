@@ -1,7 +1,8 @@
 """One night of the monitor: a recording in, a stored run, a verdict and its record out.
 
-:func:`judge_recording` analyses a recording, stores it in the history (as an
-invalid run with its one-line reason when it cannot be trusted), marks the
+:func:`judge_recording` analyses a recording and fits its diagnostics
+(:mod:`imu_square.monitor.diagnostics`), stores both in the history (a run
+that cannot be trusted as an invalid run with its one-line reason), marks the
 baseline stale on a sensor remount, runs the alarm charts over the history
 and stores the night's verdict and its pending alerts, in one transaction.
 It never prints: the ``nightly`` and ``replay`` commands report what it
@@ -27,6 +28,7 @@ from imu_square.io.times import is_date
 from imu_square.json_values import json_safe
 from imu_square.log import logger
 from imu_square.monitor.alerts.send import queue_alert
+from imu_square.monitor.diagnostics.trend import judge_diagnostics, night_diagnostics
 from imu_square.monitor.history.encoding import file_sha256, first_line, settings_hash
 from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS, EvaluationRow, RunRow
 from imu_square.monitor.stats.drift import fit_night_drift, power_on_offset_s
@@ -252,7 +254,10 @@ def _about_the_run(message, path):
 
 
 def recording_row(config, path, program=None, sha256=None, keep_unreadable=True):
-    """A recording read, analysed and made into its history row, valid or invalid.
+    """A recording read, analysed and made into its history rows, valid or invalid.
+
+    A valid run's diagnostics are fitted too (the monitor file's
+    ``[diagnostics]``); their fit never makes the run invalid.
 
     Parameters
     ----------
@@ -272,9 +277,44 @@ def recording_row(config, path, program=None, sha256=None, keep_unreadable=True)
     row : RunRow
     result : RunResult or None
         The analysis; None for an invalid run.
+    diagnostics : DiagnosticFitRow or None
+        The night's diagnostics, their run left for the store
+        (:func:`store_run`); None for an invalid run or without a diagnostic set.
     """
+    from imu_square.monitor.diagnostics.fit import diagnose_recording
+
     recording, result, reason, notes = analyse_recording(config, path, program, keep_unreadable)
-    return run_row(config, path, recording, result, reason, sha256, notes), result
+    row = run_row(config, path, recording, result, reason, sha256, notes)
+    diagnostics = None
+    if result is not None:
+        diagnostics = diagnose_recording(config.diagnostics, recording, program, config.analysis)
+    return row, result, diagnostics
+
+
+def store_run(history, row, diagnostics=None):
+    """Store a run and its diagnostics, in one transaction.
+
+    Parameters
+    ----------
+    history : History
+        The open history.
+    row : RunRow
+        The run.
+    diagnostics : DiagnosticFitRow or None
+        Its diagnostic fit (its ``run_id`` is set here).
+
+    Returns
+    -------
+    run_id : int
+        The run's row.
+    inserted : bool
+        Whether the run or its diagnostics were new.
+    """
+    with history.transaction():
+        run_id, inserted = history.add_run(row)
+        if diagnostics is not None:
+            inserted |= history.add_diagnostic_fit(replace(diagnostics, run_id=run_id))[1]
+    return run_id, inserted
 
 
 def program_mismatch(recorded, expected):
@@ -335,7 +375,10 @@ def judge_history(config, history):
     earlier = {e.run_id: e for e in history.evaluations(machine) if e.baseline_id != current}
     runs = history.runs(machine, settings_hash=settings)
     assessment = judge_runs(runs, baseline_row, design, anchors, earlier)
-    return replace(assessment, earlier=_earlier_periods(config, history, baseline_row))
+    trends = judge_diagnostics(history, runs, baseline_row, config.diagnostics, config.alarms)
+    return replace(
+        assessment, earlier=_earlier_periods(config, history, baseline_row), diagnostics=trends
+    )
 
 
 def _earlier_periods(config, history, current):
@@ -356,7 +399,7 @@ def _earlier_periods(config, history, current):
     return tuple(periods)
 
 
-def judge_recording(config, history, path, program=None, alert=False):
+def judge_recording(config, history, path, program=None, alert=False, made=None):
     """Analyse, store and judge one night's recording.
 
     The run, its verdict and, with ``alert``, the night's alert for each sink
@@ -376,14 +419,18 @@ def judge_recording(config, history, path, program=None, alert=False):
         The program the monitor expects.
     alert : bool
         Keep the night's alert in the outbox (a seeded past night has none).
+    made : tuple, optional
+        ``(row, result, diagnostics)`` of :func:`recording_row` for this
+        recording, made already (elsewhere, in parallel); the recording is
+        not read again.
 
     Returns
     -------
     NightOutcome
     """
-    row, result = recording_row(config, path, program)
+    row, result, diagnostics = made or recording_row(config, path, program)
     with history.transaction():
-        run_id, inserted = history.add_run(row)
+        run_id, inserted = store_run(history, row, diagnostics)
         assessment = judge_history(config, history)
         baseline_row = assessment.baseline_row
         night = assessment.night_of(run_id)
@@ -513,7 +560,10 @@ def night_record(assessment, night, line):
         ``state`` (the night's), ``machine_state`` (``alarm`` while an alarm
         stands, else the night's) and ``alarm_since``, ``verdict``,
         ``change_urad``, ``u_change_urad``, the run's identity and analysis,
-        the baseline and, when anchored, the absolute machine squareness.
+        the baseline and, when anchored, the absolute machine squareness;
+        ``diagnostics``, each diagnostic's value, change and alarm state that
+        night (:func:`~imu_square.monitor.diagnostics.trend.night_diagnostics`),
+        and ``diagnostic_alarms``, those in alarm.
     """
     run = night.run
     base = assessment.baseline_row
@@ -552,6 +602,10 @@ def night_record(assessment, night, line):
         },
         "chart": None if night.chart is None else night.chart.to_json_dict(),
     }
+    record["diagnostics"] = night_diagnostics(assessment.diagnostics, run.id)
+    record["diagnostic_alarms"] = [
+        name for name, d in record["diagnostics"].items() if d["state"] == "alarm"
+    ]
     anchored = machine_squareness(assessment, night)
     if anchored is not None:
         record["machine_squareness_urad"] = anchored[0] / URAD

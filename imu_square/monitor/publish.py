@@ -24,6 +24,9 @@ class NightFiles:
     ----------
     trend_png, report_html : Path or None
         The trend chart and the report; None when they could not be written.
+    diagnostics_png : Path or None
+        The diagnostics' trend chart; None without diagnostics, or when it
+        could not be written.
     metrics : Path or None
         The Prometheus text file, when configured.
     alerts : AlertReport or None
@@ -34,6 +37,7 @@ class NightFiles:
     report_html: Path | None
     metrics: Path | None
     alerts: object
+    diagnostics_png: Path | None = None
 
 
 def ensure_folder(folder, what, make=True):
@@ -144,7 +148,7 @@ def metrics_snapshot(assessment):
 
 
 def write_night_outputs(config, history, outcome, out_dir):
-    """Draw the trend chart and the report, write the metrics, send the alerts.
+    """Draw the trend charts and the report, write the metrics, send the alerts.
 
     Parameters
     ----------
@@ -161,6 +165,7 @@ def write_night_outputs(config, history, outcome, out_dir):
     -------
     NightFiles
     """
+    from imu_square.monitor.report.diagnostics_figure import plot_diagnostics
     from imu_square.monitor.report.figures import plot_trend
     from imu_square.monitor.report.html import render_report, write_report
 
@@ -174,6 +179,14 @@ def write_night_outputs(config, history, outcome, out_dir):
     except (OSError, ValueError) as exc:
         logger.warning("%s: trend chart not written: %s", trend, exc)
         trend = None
+    diagnostics = None
+    if assessment.diagnostics:
+        diagnostics = out_dir / f"{config.machine_id}-diagnostics.png"
+        try:
+            plot_diagnostics(assessment, diagnostics)
+        except (OSError, ValueError) as exc:
+            logger.warning("%s: diagnostics chart not written: %s", diagnostics, exc)
+            diagnostics = None
     try:
         last, title = last_valid_result(assessment, config.analysis.options())
         write_report(report, render_report(assessment, last, title))
@@ -196,4 +209,4 @@ def write_night_outputs(config, history, outcome, out_dir):
             alerts = deliver_alerts(config.alerts, history, config.machine_id, outcome.alert)
         except ImuSquareError as exc:
             logger.error("alerts not sent now (%s): they stay pending in the history", exc)
-    return NightFiles(trend, report, metrics, alerts)
+    return NightFiles(trend, report, metrics, alerts, diagnostics)

@@ -9,7 +9,9 @@ Each worker reads its own file; results stream back as they finish and are
 stored one by one (a transaction each), so an interrupted replay loses at
 most the files in flight and the next call skips what is stored: a file is
 skipped when its SHA-256 is in the history already under the same analysis
-settings. Once every file is in, the verdicts are recomputed over the whole
+settings, with its diagnostics under the same diagnostic settings (a run
+stored without them is read again for them: a replay rebuilds an archive's
+diagnostics). Once every file is in, the verdicts are recomputed over the whole
 history in recording-time order (:func:`~.night.judge_history`), so they do
 not depend on the order the files finished in, nor on the number of workers.
 """
@@ -24,6 +26,7 @@ from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import AnalysisSettings
+from imu_square.monitor.diagnostics.settings import DiagnosticSettings
 from imu_square.monitor.history.encoding import first_line
 from imu_square.monitor.history.rows import RunRow
 
@@ -54,11 +57,14 @@ class ReplayJob:
         The analysis settings.
     program : TestProgram or None
         The program the monitor expects; a recording of another is invalid.
+    diagnostics : DiagnosticSettings
+        The effects fitted to every valid run.
     """
 
     machine_id: str
     analysis: AnalysisSettings = field(default_factory=AnalysisSettings)
     program: object = None
+    diagnostics: DiagnosticSettings = field(default_factory=DiagnosticSettings)
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,9 @@ class FileOutcome:
         The file's SHA-256, "" if unreadable.
     row : dict or None
         The history row's fields (:class:`~.rows.RunRow`), None when skipped or failed.
+    diagnostics : DiagnosticFitRow or None
+        The run's diagnostic fit, its run left for the store; None for an
+        invalid run, without a diagnostic set, or when skipped or failed.
     reason : str
         The invalid run's or the failure's one-line reason.
     seconds : float
@@ -86,6 +95,7 @@ class FileOutcome:
     status: str
     sha256: str = ""
     row: dict | None = None
+    diagnostics: object = None
     reason: str = ""
     seconds: float = 0.0
 
@@ -168,7 +178,8 @@ def replay_file(path, job, known=frozenset()):
     job : ReplayJob
         The machine and the analysis settings.
     known : set of str
-        SHA-256 of the recordings already stored under these settings: skipped.
+        SHA-256 of the recordings already stored under these settings, with
+        their diagnostics: skipped.
 
     Returns
     -------
@@ -184,12 +195,20 @@ def replay_file(path, job, known=frozenset()):
         if sha in known:
             return FileOutcome(path, "skipped", sha, seconds=time.perf_counter() - start)
         # a file that cannot be read is counted as failed, never stored as a run
-        row, result = recording_row(job, local, job.program, sha, keep_unreadable=False)
+        row, result, diagnostics = recording_row(
+            job, local, job.program, sha, keep_unreadable=False
+        )
         values = {f.name: getattr(row, f.name) for f in fields(RunRow)}
         values["recording_path"] = path
         status = "analysed" if result is not None else "invalid"
         return FileOutcome(
-            path, status, sha, values, row.invalid_reason or "", seconds=time.perf_counter() - start
+            path,
+            status,
+            sha,
+            values,
+            diagnostics,
+            row.invalid_reason or "",
+            seconds=time.perf_counter() - start,
         )
     except (OSError, ImuSquareError) as exc:
         # the outcome names the file: its reason need not
@@ -371,8 +390,35 @@ class ReplaySummary:
         return asdict(self)
 
 
+def stored_hashes(history, config):
+    """The recordings a replay skips: stored under the monitor file's analysis settings, each
+    valid one with its diagnostics under its diagnostic settings.
+
+    Parameters
+    ----------
+    history : History
+        The open history.
+    config : MonitorConfig
+        The monitor file (as the replay runs it).
+
+    Returns
+    -------
+    frozenset of str
+        SHA-256 of the recordings.
+    """
+    from imu_square.monitor.history.encoding import settings_hash
+    from imu_square.monitor.night import analysis_settings
+
+    analysis = settings_hash(analysis_settings(config))
+    if not config.diagnostics.enabled:
+        return frozenset(history.recording_hashes(config.machine_id, analysis))
+    key = config.diagnostics.key()
+    return frozenset(history.diagnosed_hashes(config.machine_id, analysis, key))
+
+
 def store_outcome(history, outcome):
-    """Store one file's run (its own transaction): at most the files in flight are lost.
+    """Store one file's run and diagnostics (one transaction): at most the files in flight
+    are lost.
 
     Parameters
     ----------
@@ -384,6 +430,8 @@ def store_outcome(history, outcome):
     Returns
     -------
     tuple (int, bool)
-        The run's id, and whether it was inserted now.
+        The run's id, and whether it (or its diagnostics) was inserted now.
     """
-    return history.add_run(RunRow(**outcome.row))
+    from imu_square.monitor.night import store_run
+
+    return store_run(history, RunRow(**outcome.row), outcome.diagnostics)

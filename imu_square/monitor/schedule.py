@@ -71,6 +71,15 @@ false_alarm_nights = 730
 # The change you want found quickly; its detection delay is reported.
 step_um_per_m = 10.0
 
+# After every valid night the effects a ballbar reports are fitted and trended, each with
+# its uncertainty (imu-square history). Default: all six; [] fits none.
+# [diagnostics]
+# effects = ["servo_mismatch", "backlash", "reversal_spikes", "scale_mismatch",
+#            "straightness_yaw", "structural_vibration"]
+# A diagnostic's own alarm, off by default: the change it should find quickly.
+# [diagnostics.alarms]
+# backlash_x_um = 3.0
+
 # Alert sinks (see the README, "Alerts and metrics"). Without them the nightly job
 # logs its verdict and sets its exit code.
 # [alerts.email]

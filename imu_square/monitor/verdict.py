@@ -159,6 +159,9 @@ class Assessment:
     alarm_since_ns : int or None
         When the alarm that stands fired (the first alarm night since the
         current baseline); it stands until a new baseline is set. [ns]
+    diagnostics : tuple of DiagnosticTrend
+        Each diagnostic of the monitor file's set over the nights
+        (:mod:`imu_square.monitor.diagnostics.trend`).
     """
 
     machine_id: str
@@ -168,6 +171,7 @@ class Assessment:
     anchors: tuple = field(default=())
     earlier: tuple = field(default=())
     alarm_since_ns: int | None = None
+    diagnostics: tuple = field(default=())
 
     @property
     def state(self):
@@ -496,12 +500,16 @@ def verdict(assessment, night):
     -------
     str
     """
+    from imu_square.monitor.diagnostics.trend import alarm_clause
+
     line = _line(assessment, night)
     if machine_state(assessment, night) != night.state:
         line += (
             f"; the machine stands in alarm since {iso(assessment.alarm_since_ns)[:10]}, "
             f"until a new baseline is set"
         )
+    if not night.stated:
+        line += alarm_clause(assessment.diagnostics, night.run.id)
     return line
 
 

@@ -112,38 +112,65 @@ class AlertReport:
         }
 
 
-def queue_alert(config, history, record, *, machine_id, state, verdict, now=None):
-    """Make a night's alert and keep it in the outbox for each sink that takes its state.
+def sink_takes(sink, state, record):
+    """Whether a sink takes a night's alert: its state, or a diagnostic in alarm.
 
-    Call it inside the transaction that stores the night, so that the night
-    and its pending alerts land together; then :func:`deliver_alerts`.
+    A diagnostic's own alarm (off by default: ``[diagnostics.alarms]``) goes
+    where the squareness's alarms go, whatever the squareness's state.
 
     Parameters
     ----------
-    config : AlertsConfig
-        The ``[alerts]`` section.
-    history : History
-        The open history.
-    record : dict
-        The night's record (made JSON-safe by
-        :func:`~imu_square.json_values.json_safe`).
-    machine_id : str
-        The machine's id.
+    sink : object
+        A sink of the ``[alerts]`` section (its ``states``).
     state : str
-        One of :data:`~imu_square.monitor.alerts.alert.STATES`.
-    verdict : str
-        The one-line verdict.
-    now : datetime, optional
-        The alert's time (aware); the current time by default.
+        The alert's state (the squareness's).
+    record : dict
+        The night's record (its ``diagnostic_alarms``).
 
     Returns
     -------
-    Alert
+    bool
+    """
+    return state in sink.states or bool(record.get("diagnostic_alarms") and "alarm" in sink.states)
+
+
+def queue_alert(config, history, record, *, machine_id, state, verdict, now=None):
+    """Make a night's alert and keep it in the outbox for each sink that takes its state.
+
+    A night with a diagnostic in alarm (``record["diagnostic_alarms"]``) goes to
+    the sinks that take ``alarm`` too, whatever the squareness's state: the
+    alert's state stays the squareness's, its verdict and record name the
+    diagnostic.
+
+        Call it inside the transaction that stores the night, so that the night
+        and its pending alerts land together; then :func:`deliver_alerts`.
+
+        Parameters
+        ----------
+        config : AlertsConfig
+            The ``[alerts]`` section.
+        history : History
+            The open history.
+        record : dict
+            The night's record (made JSON-safe by
+            :func:`~imu_square.json_values.json_safe`).
+        machine_id : str
+            The machine's id.
+        state : str
+            One of :data:`~imu_square.monitor.alerts.alert.STATES`.
+        verdict : str
+            The one-line verdict.
+        now : datetime, optional
+            The alert's time (aware); the current time by default.
+
+        Returns
+        -------
+        Alert
     """
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict, now=now)
     with history.transaction():
         for sink in config.sinks:
-            if sink.kind != "log" and state in sink.states:  # the log is written when sent
+            if sink.kind != "log" and sink_takes(sink, state, record):  # the log: when sent
                 history.add_alert(
                     OutboxRow(
                         machine_id=alert.machine_id,
@@ -202,7 +229,7 @@ def deliver_alerts(config, history, machine_id, alert=None, *, include_rejected=
         backlog += rounds.run(sink, [r for r in mine if r not in tonight], 1)
         if alert is None:
             continue
-        if alert.state not in sink.states:
+        if not sink_takes(sink, alert.state, alert.record):
             outcomes.append(SinkOutcome(sink.name, alert.alert_id, alert.state, "skipped"))
         elif sink.kind == "log":  # logging cannot fail in a way a retry would fix
             sink.deliver(alert)
@@ -237,7 +264,7 @@ def send_without_history(config, record, *, machine_id, state, verdict):
     """
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict)
     outcomes = []
-    for sink in (s for s in config.sinks if state in s.states):
+    for sink in (s for s in config.sinks if sink_takes(s, state, record)):
         if sink.kind == "log":
             sink.deliver(alert)
             result = ("sent", 1, None)

@@ -1,4 +1,5 @@
-"""What one row of the monitor's history holds: a run, a baseline, an anchor, a verdict, an alert.
+"""What one row of the monitor's history holds: a run, a baseline, an anchor, a verdict, an
+alert, a night's diagnostics.
 
 The rows are frozen dataclasses, checked and normalised when they are built,
 so that a row reads back from either backend exactly as it was stored:
@@ -349,6 +350,9 @@ class BaselineRow:
         The alarm charts designed for this baseline
         (:meth:`~imu_square.monitor.stats.alarms.AlarmDesign.to_json_dict`); empty until
         designed.
+    diagnostic_designs : dict
+        The alarm charts designed for the diagnostics with an alarm, by name
+        (:mod:`imu_square.monitor.diagnostics.alarms`); each made once, when first needed.
     """
 
     id: int | None = _checked(default=None, minimum=1)
@@ -369,6 +373,7 @@ class BaselineRow:
     note: str = _checked(_storable, default="")
     created_at_ns: int | None = None
     alarm_design: dict = field(default_factory=dict)
+    diagnostic_designs: dict = field(default_factory=dict)
 
     def __post_init__(self):
         _check_fields(self)
@@ -514,3 +519,108 @@ class OutboxRow:
 
     def __post_init__(self):
         check_option("OutboxRow.state", self.state, OUTBOX_STATES)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DiagnosticRow:
+    """One diagnostic of one night's fit (:mod:`imu_square.monitor.diagnostics`).
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    fit_id : int or None
+        The fit it belongs to; filled in by the store.
+    name : str
+        The diagnostic (:data:`~imu_square.monitor.diagnostics.catalog.CATALOG`).
+    unit : str
+        Its SI unit.
+    value, u_value : float or None
+        Its estimate and standard uncertainty; None when it is missing. [SI]
+    missing_reason : str or None
+        Why it is missing, one line; None when it has a value.
+    """
+
+    id: int | None = _checked(default=None, minimum=1)
+    fit_id: int | None = _checked(default=None, minimum=1)
+    name: str
+    unit: str
+    value: float | None = None
+    u_value: float | None = None
+    missing_reason: str | None = None
+
+    def __post_init__(self):
+        _check_fields(self)
+        if (self.value is None) == (self.missing_reason is None):
+            raise HistoryError(
+                f"DiagnosticRow {self.name!r}: a value, or the reason it is missing (one of "
+                f"the two), got value {self.value!r} and reason {self.missing_reason!r}"
+            )
+        if self.value is not None and (self.u_value is None or self.u_value < 0):
+            raise HistoryError(
+                f"DiagnosticRow.u_value must be a standard uncertainty >= 0 with the value of "
+                f"{self.name!r}, got {self.u_value!r}"
+            )
+
+
+def _diagnostic_rows(where, rows):
+    rows = tuple(rows)
+    if not all(isinstance(r, DiagnosticRow) for r in rows):
+        raise HistoryError(f"{where} must be DiagnosticRow, got {rows!r}")
+    names = [r.name for r in rows]
+    if len(set(names)) != len(names):
+        raise HistoryError(f"{where} must not repeat a diagnostic, got {names!r}")
+    return rows
+
+
+@dataclass(frozen=True, kw_only=True)
+class DiagnosticFitRow:
+    """A night's diagnostic fit: the settings it ran with and every diagnostic of the set.
+
+    A fit that failed keeps its row, its ``failure`` and every diagnostic
+    with that reason: the night's squareness stands without it.
+
+    Attributes
+    ----------
+    id : int or None
+        Row id; None until stored.
+    run_id : int or None
+        The run it was fitted to; required by the store.
+    settings : dict
+        The diagnostic settings (effects, shapes, software), JSON values.
+    settings_hash : str or None
+        :func:`settings_hash` of ``settings``; computed when None.
+    software_version : str
+        imu-square's version that fitted it.
+    fitted_at_ns : int or None
+        When; stamped by the store when None. [ns]
+    seconds : float or None
+        The fit's time. [s]
+    failure : str or None
+        Why the fit gave nothing, one line; None when it ran.
+    fit : dict
+        The fit's own numbers (residual sum of squares, degrees of freedom,
+        steps, simulator runs, ...), JSON values.
+    values : tuple of DiagnosticRow
+        Every diagnostic of the set (stored in the table ``diagnostics``).
+    """
+
+    id: int | None = _checked(default=None, minimum=1)
+    run_id: int | None = _checked(default=None, minimum=1)
+    settings: dict
+    settings_hash: str | None = _checked(_sha256, default=None, required=False)
+    software_version: str = __version__
+    fitted_at_ns: int | None = None
+    seconds: float | None = None
+    failure: str | None = None
+    fit: dict = field(default_factory=dict)
+    values: tuple = _checked(_diagnostic_rows, default=())
+
+    def __post_init__(self):
+        _check_fields(self)
+        if self.settings_hash is None:
+            object.__setattr__(self, "settings_hash", settings_hash(self.settings))
+
+    def value(self, name):
+        """The :class:`DiagnosticRow` named ``name``, or None."""
+        return next((v for v in self.values if v.name == name), None)

@@ -22,7 +22,11 @@ Versions:
    that the drift regression reads (temperatures, time since power-on);
 3. each baseline's alarm design, computed once when it is first needed;
 4. the alert outbox: each night's alert for each sink, kept until delivered
-   (or rejected), written with the night's run and verdict.
+   (or rejected), written with the night's run and verdict;
+5. each night's diagnostics (``diagnostic_fits``, one per run and diagnostic
+   settings, and its ``diagnostics``: an estimate and its uncertainty, or the
+   reason it is missing), and the alarm designs of the diagnostics of each
+   baseline.
 """
 
 from dataclasses import dataclass
@@ -206,11 +210,52 @@ MIGRATIONS = (
             "CREATE INDEX outbox_machine_state ON outbox (machine_id, state, created_at_ns)",
         ),
     ),
+    Migration(
+        5,
+        "each night's diagnostics",
+        (
+            """CREATE TABLE diagnostic_fits (
+                id {id},
+                run_id BIGINT NOT NULL REFERENCES runs (id),
+                settings_hash TEXT NOT NULL,
+                settings_json TEXT NOT NULL,
+                software_version TEXT NOT NULL,
+                fitted_at_ns BIGINT NOT NULL,
+                seconds DOUBLE PRECISION,
+                failure TEXT,
+                fit_json TEXT NOT NULL,
+                CONSTRAINT diagnostic_fits_run_settings UNIQUE (run_id, settings_hash)
+            )""",
+            """CREATE TABLE diagnostics (
+                id {id},
+                fit_id BIGINT NOT NULL REFERENCES diagnostic_fits (id),
+                name TEXT NOT NULL,
+                unit TEXT NOT NULL,
+                value DOUBLE PRECISION,
+                u_value DOUBLE PRECISION,
+                missing_reason TEXT,
+                CONSTRAINT diagnostics_fit_name UNIQUE (fit_id, name),
+                CONSTRAINT diagnostics_missing
+                    CHECK ((value IS NULL) = (missing_reason IS NOT NULL))
+            )""",
+            "ALTER TABLE baselines ADD COLUMN diagnostic_designs_json TEXT NOT NULL DEFAULT '{}'",
+        ),
+    ),
 )
 
 #: The tables a history holds.
 TABLES = frozenset(
-    {"schema_version", "runs", "baselines", "baseline_runs", "anchors", "evaluations", "outbox"}
+    {
+        "schema_version",
+        "runs",
+        "baselines",
+        "baseline_runs",
+        "anchors",
+        "evaluations",
+        "outbox",
+        "diagnostic_fits",
+        "diagnostics",
+    }
 )
 
 

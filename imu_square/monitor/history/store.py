@@ -36,6 +36,7 @@ from pathlib import Path
 from imu_square.errors import HistoryError
 from imu_square.log import logger
 from imu_square.monitor.history import schema
+from imu_square.monitor.history.diagnostic_fits import DIAGNOSTIC_FITS, DIAGNOSTICS, DiagnosticFits
 from imu_square.monitor.history.encoding import (
     canonical_json,
     datetime_from_ns,
@@ -49,6 +50,8 @@ from imu_square.monitor.history.rows import (
     EVALUATION_STATES,
     AnchorRow,
     BaselineRow,
+    DiagnosticFitRow,
+    DiagnosticRow,
     EvaluationRow,
     OutboxRow,
     RunRow,
@@ -59,6 +62,8 @@ __all__ = [
     "EVALUATION_STATES",
     "AnchorRow",
     "BaselineRow",
+    "DiagnosticFitRow",
+    "DiagnosticRow",
     "EvaluationRow",
     "History",
     "OutboxRow",
@@ -81,7 +86,10 @@ BASELINES = Table("baselines", BaselineRow, skip=("run_ids",))  # in baseline_ru
 ANCHORS = Table("anchors", AnchorRow)
 EVALUATIONS = Table("evaluations", EvaluationRow)
 #: Every table's columns as this module reads and writes them.
-COLUMNS = {t.name: t.columns for t in (RUNS, BASELINES, ANCHORS, EVALUATIONS, OUTBOX)} | {
+COLUMNS = {
+    t.name: t.columns
+    for t in (RUNS, BASELINES, ANCHORS, EVALUATIONS, OUTBOX, DIAGNOSTIC_FITS, DIAGNOSTICS)
+} | {
     "baseline_runs": ["baseline_id", "run_id"],
     "schema_version": ["version", "description", "applied_at_ns", "software_version"],
 }
@@ -162,7 +170,7 @@ def _window(p, column, since, until):
     return [f"{column} {op} {p(t)}" for op, t in ((">=", since), ("<", until)) if t is not None]
 
 
-class History(Outbox):
+class History(Outbox, DiagnosticFits):
     """An open history; see the module's docstring. Made by :func:`open_history`.
 
     Attributes

@@ -1,6 +1,7 @@
 """The monitor's report: one self-contained HTML page to show a manager.
 
-Sections, each an ``<section id=...>``: the verdict, the trend chart, the last
+Sections, each an ``<section id=...>``: the verdict, the trend chart, the
+diagnostics (the latest night's, their trend chart and their alarms), the last
 run in the paper's Fig. 5 style, the sensor (eps_c and temperature over time),
 the baseline with its anchors, the alarm design, and the latest nights. Images
 are PNGs inlined as ``data:`` URIs and the style is inline, so the page is one
@@ -18,7 +19,16 @@ from imu_square import __version__
 from imu_square.monitor.verdict import iso, machine_squareness, verdict
 from imu_square.units import URAD
 
-SECTIONS = ("verdict", "trend", "last-run", "sensor", "baseline", "alarm-design", "nights")
+SECTIONS = (
+    "verdict",
+    "trend",
+    "diagnostics",
+    "last-run",
+    "sensor",
+    "baseline",
+    "alarm-design",
+    "nights",
+)
 _CSS = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1150px; color: #222;
        padding: 0 1em; box-sizing: border-box; overflow-wrap: anywhere; }
@@ -94,6 +104,9 @@ def render_report(assessment, last_result=None, last_title="", now=None):
         f", state <b>{_e(state)}</b></p></section>",
         '<section id="trend"><h2>Trend</h2>',
         f'<img alt="trend chart of the change since the baseline" src="{trend}"></section>',
+        '<section id="diagnostics"><h2>Diagnostics</h2>',
+        _diagnostics_html(assessment),
+        "</section>",
         '<section id="last-run"><h2>Last valid run</h2>',
     ]
     if last_result is not None:
@@ -121,6 +134,49 @@ def render_report(assessment, last_result=None, last_title="", now=None):
         "</section></body></html>",
     ]
     return "\n".join(parts) + "\n"
+
+
+def _diagnostics_html(assessment):
+    """The latest night's diagnostics, their alarms' designs and their trend chart."""
+    from imu_square.monitor.diagnostics.text import value_text
+    from imu_square.monitor.report.diagnostics_figure import plot_diagnostics
+
+    trends = assessment.diagnostics
+    if not trends:
+        return "<p>No diagnostics: the monitor file's [diagnostics] fits no effect.</p>"
+    last = next(
+        (n for n in reversed(assessment.nights) if any(t.night_of(n.run.id) for t in trends)),
+        None,
+    )
+    head = (
+        "<tr><th class='text'>diagnostic</th><th class='text'>what it is</th><th>value</th>"
+        "<th>change since the baseline</th><th class='text'>alarm</th></tr>"
+    )
+    rows = []
+    for t in trends:
+        d = t.diagnostic
+        n = None if last is None else t.night_of(last.run.id)
+        value = change = n.missing_reason if n is not None and n.missing_reason else "–"
+        if n is not None and not n.missing_reason:
+            value = f"{value_text(n.value / d.scale, n.u_value / d.scale)} {d.unit}"
+            if math.isfinite(n.change):
+                change = f"{value_text(n.change / d.scale, n.u_change / d.scale)} {d.unit}"
+        alarm = (n.state if n is not None else "") if t.design is not None else "off"
+        rows.append(
+            f"<tr><td class='text'>{_e(d.name)}</td><td class='text'>{_e(d.meaning)}</td>"
+            f"<td>{_e(value)}</td><td>{_e(change)}</td>"
+            f"<td class='text {_e(alarm)}'>{_e(alarm or t.note)}</td></tr>"
+        )
+    when = iso(last.run.recorded_at_ns) if last is not None else "–"
+    designs = "".join(f"<li>{_e(t.describe_alarm())}</li>" for t in trends if t.design)
+    chart = _png(lambda p: plot_diagnostics(assessment, p))
+    return (
+        f"<p>The effects a ballbar reports, fitted to every valid night's recording; the "
+        f"latest night's ({_e(when)}), with their standard uncertainties (k=1):</p>"
+        f'<div class="table"><table>{head}{"".join(rows)}</table></div>'
+        + (f"<p>Alarms:</p><ul>{designs}</ul>" if designs else "")
+        + f'<img alt="trend chart of the diagnostics" src="{chart}">'
+    )
 
 
 def _baseline_html(assessment):

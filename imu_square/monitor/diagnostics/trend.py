@@ -1,0 +1,259 @@
+"""Each diagnostic's trend over a machine's nights: its values, its change, its alarm.
+
+:func:`judge_diagnostics` reads every night's fit under the monitor file's
+diagnostic settings and, for each diagnostic of the set, gives every night
+its value, its change against the diagnostic's baseline (:mod:`.baseline`,
+from the nights of the machine's current baseline) and, for a diagnostic
+with an alarm, the designed charts' state (:mod:`.alarms`). The charts run
+over every night since the baseline that has a value, in recording-time
+order, whatever the squareness's state that night (a backlash does not
+depend on the sensor's thermal state or mounting). An alarm stands until a
+new baseline is set, as the squareness's does.
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+from imu_square.errors import MonitorError
+from imu_square.log import logger
+from imu_square.monitor.diagnostics.alarms import describe, design_inputs, stored_design
+from imu_square.monitor.diagnostics.baseline import MIN_NIGHTS, diagnostic_baseline
+from imu_square.units import URAD
+
+NO_FIT = "no diagnostic fit under the monitor file's [diagnostics]"
+
+
+@dataclass(frozen=True)
+class DiagnosticNight:
+    """One diagnostic on one night.
+
+    Attributes
+    ----------
+    run : RunRow
+        The night's run.
+    value, u_value : float
+        The estimate and its standard uncertainty; NaN when missing. [SI]
+    missing_reason : str
+        Why it is missing; "" when it has a value.
+    change, u_change : float
+        Against the diagnostic's baseline, the change and its uncertainty
+        (the night's with the baseline nights' scatter, the baseline's own
+        error included); NaN without a baseline or before it. [SI]
+    chart : ChartPoint or None
+        What the alarm charts saw, for a diagnostic with an alarm.
+    state : str
+        ``"ok"``, ``"warning"`` or ``"alarm"`` for a charted night (``alarm``
+        from the first alarm on); ``"baseline"`` for the baseline's nights; ""
+        otherwise.
+    """
+
+    run: object
+    value: float = math.nan
+    u_value: float = math.nan
+    missing_reason: str = ""
+    change: float = math.nan
+    u_change: float = math.nan
+    chart: object = None
+    state: str = ""
+
+
+@dataclass(frozen=True)
+class DiagnosticTrend:
+    """One diagnostic over a machine's nights.
+
+    Attributes
+    ----------
+    diagnostic : Diagnostic
+        What it is.
+    nights : tuple of DiagnosticNight
+        Every valid night with a fit, in recording-time order.
+    baseline : DiagnosticBaseline or None
+        Its baseline, from the machine's current baseline's nights.
+    design : AlarmDesign or None
+        Its alarm's design, when it has one.
+    step : float or None
+        The change its alarm should find quickly. [SI]
+    note : str
+        Why it has no baseline or no alarm although one was asked; "" otherwise.
+    alarm_since_ns : int or None
+        When its standing alarm fired. [ns]
+    """
+
+    diagnostic: object
+    nights: tuple
+    baseline: object = None
+    design: object = None
+    step: float | None = None
+    note: str = ""
+    alarm_since_ns: int | None = None
+
+    def night_of(self, run_id):
+        """The night of a run, or None."""
+        return next((n for n in self.nights if n.run.id == run_id), None)
+
+    def describe_alarm(self):
+        """The alarm's design in one line, or "" without one."""
+        return "" if self.design is None else describe(self.design, self.diagnostic)
+
+
+def judge_diagnostics(history, runs, baseline_row, settings, alarms):
+    """Every diagnostic of the set over a machine's runs.
+
+    Parameters
+    ----------
+    history : History
+        The open history (the fits; an alarm's design is kept in it).
+    runs : sequence of RunRow
+        The machine's runs under the current analysis settings, in
+        recording-time order.
+    baseline_row : BaselineRow or None
+        The machine's current baseline.
+    settings : DiagnosticSettings
+        The monitor file's ``[diagnostics]``.
+    alarms : AlarmSettings
+        The monitor file's ``[alarms]``.
+
+    Returns
+    -------
+    tuple of DiagnosticTrend
+        One per diagnostic of the set, in the catalog's order.
+    """
+    if not settings.enabled or not runs:
+        return ()
+    fits = history.diagnostic_fits(runs[0].machine_id, settings.key())
+    valid = [r for r in runs if r.valid and r.id in fits]
+    return tuple(
+        _trend(history, d, valid, fits, baseline_row, settings.alarm_steps.get(d.name), alarms)
+        for d in settings.diagnostics()
+    )
+
+
+def _night(run, fit, name):
+    row = fit.value(name)
+    if row is None:
+        return DiagnosticNight(run, missing_reason=NO_FIT)
+    if row.value is None:
+        return DiagnosticNight(run, missing_reason=row.missing_reason)
+    return DiagnosticNight(run, row.value, row.u_value)
+
+
+def _trend(history, diagnostic, runs, fits, baseline_row, step_si, alarms):
+    nights = [_night(r, fits[r.id], diagnostic.name) for r in runs]
+    if baseline_row is None:
+        return DiagnosticTrend(diagnostic, tuple(nights), step=step_si)
+    in_baseline = set(baseline_row.run_ids)
+    base_nights = [n for n in nights if n.run.id in in_baseline and n.missing_reason == ""]
+    baseline = diagnostic_baseline([n.value for n in base_nights], [n.u_value for n in base_nights])
+    if baseline is None:
+        note = (
+            f"fewer than {MIN_NIGHTS} of the baseline's nights have a value: replay their "
+            f"recordings ('imu-square replay') or set a new baseline"
+        )
+        return DiagnosticTrend(diagnostic, tuple(nights), step=step_si, note=note)
+    design, note = None, ""
+    if step_si is not None:
+        try:
+            design = stored_design(
+                history,
+                baseline_row,
+                diagnostic.name,
+                design_inputs(diagnostic, baseline, step_si, alarms),
+            )
+        except MonitorError as exc:
+            note = f"no alarm: {exc}"
+            logger.warning("diagnostic %s: %s", diagnostic.name, note)
+    start = baseline_row.first_run_at_ns or 0
+    charted = []
+    for i, n in enumerate(nights):
+        if n.run.id in in_baseline:
+            nights[i] = _with_change(n, baseline, "baseline")
+        elif n.missing_reason == "" and (n.run.recorded_at_ns or 0) >= start:
+            charted.append(i)
+            nights[i] = _with_change(n, baseline, "")
+    alarm_since = None
+    if design is not None and charted:
+        from imu_square.monitor.stats.alarms import run_charts
+
+        # the design's angle fields are the diagnostic's shown unit times URAD (.alarms)
+        run = run_charts(
+            design,
+            [nights[i].change / diagnostic.scale * URAD for i in charted],
+            [_night_u(nights[i], baseline) / diagnostic.scale * URAD for i in charted],
+        )
+        for i, point in zip(charted, run.points, strict=True):
+            state = point.state
+            if alarm_since is not None:
+                state = "alarm"
+            elif state == "alarm":
+                alarm_since = nights[i].run.recorded_at_ns
+            nights[i] = replace(nights[i], chart=point, state=state)
+    return DiagnosticTrend(
+        diagnostic, tuple(nights), baseline, design, step_si, note, alarm_since_ns=alarm_since
+    )
+
+
+def _night_u(night, baseline):
+    """A night's uncertainty for the charts: its own with the baseline nights' scatter. [SI]"""
+    return math.hypot(night.u_value, baseline.between)
+
+
+def _with_change(night, baseline, state):
+    return replace(
+        night,
+        change=night.value - baseline.value,
+        u_change=math.hypot(_night_u(night, baseline), baseline.u_value),
+        state=state,
+    )
+
+
+def night_diagnostics(trends, run_id):
+    """Each diagnostic on one night, for its record (shown units).
+
+    Parameters
+    ----------
+    trends : sequence of DiagnosticTrend
+        The machine's diagnostics.
+    run_id : int
+        The night's run.
+
+    Returns
+    -------
+    dict of str to dict
+        Diagnostic name to ``value``, ``u_value``, ``unit``, ``change``,
+        ``u_change`` (None when missing), ``state`` ("" without an alarm) and
+        ``missing_reason``; empty when the run has no fit.
+    """
+    out = {}
+    for t in trends:
+        n = t.night_of(run_id)
+        if n is None:
+            continue
+        scale = t.diagnostic.scale
+        out[t.diagnostic.name] = {
+            "value": _shown(n.value, scale),
+            "u_value": _shown(n.u_value, scale),
+            "unit": t.diagnostic.unit,
+            "change": _shown(n.change, scale),
+            "u_change": _shown(n.u_change, scale),
+            "state": n.state,
+            "missing_reason": n.missing_reason or None,
+        }
+    return out
+
+
+def alarm_clause(trends, run_id):
+    """What the verdict line adds for the diagnostics in alarm on a night ("" for none)."""
+    parts = []
+    for t in trends:
+        n = t.night_of(run_id)
+        if n is not None and n.state == "alarm":
+            d = t.diagnostic
+            parts.append(
+                f"{d.name} {n.change / d.scale:+.3g} ± {n.u_change / d.scale:.2g} {d.unit} since "
+                f"the baseline"
+            )
+    return f"; diagnostic alarm: {', '.join(parts)}: check the machine" if parts else ""
+
+
+def _shown(x, scale):
+    return x / scale if math.isfinite(x) else None

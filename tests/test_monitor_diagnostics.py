@@ -1,0 +1,247 @@
+"""The monitor's nightly diagnostics end to end through the CLI: real recordings, a real
+SQLite history.
+
+The machine of tests/monitor_rig.py with a backlash of X: its baseline is set from five
+nights, then the backlash grows by 3 µm a week. The backlash's own alarm (asked for in
+the monitor file, off by default) must fire while the squareness stays ``ok``; every
+valid night stores every diagnostic, named or not; ``history``, its charts and the
+report show them; a fit that fails loses nothing of the night; ``replay`` rebuilds the
+diagnostics of an archive whose runs were stored without them.
+"""
+
+import json
+from datetime import timedelta
+
+import pytest
+from monitor_rig import ALPHA, MONITOR, NO_DIAGNOSTICS, PROGRAM, SENSOR, START, judge
+
+from imu_square.cli import main
+from imu_square.io.mcap import write_mcap
+from imu_square.monitor.diagnostics.catalog import DEFAULT_EFFECTS, diagnostics_of
+from imu_square.monitor.diagnostics.settings import DiagnosticSettings
+from imu_square.monitor.history.store import open_history
+from imu_square.monitor.schedule import EXIT_CODES
+from imu_square.simulate.geometry import Geometry
+from imu_square.simulate.machine import MachineModel
+from imu_square.simulate.run import simulate_run
+
+BACKLASH_UM = 2.0
+GROWTH_UM_PER_DAY = 3.0 / 7
+ALARMED = "\n[diagnostics.alarms]\nbacklash_x_um = 3.0\n"
+
+
+def backlash_night(folder, day, backlash_um=BACKLASH_UM):
+    """One night of the rig's machine with a backlash of X; its path."""
+    machine = MachineModel(
+        geometry=Geometry(machine_squareness_rad=ALPHA),
+        tau_x_s=2e-3,
+        tau_y_s=2.5e-3,
+        backlash_x_m=backlash_um * 1e-6,
+    )
+    when = START + timedelta(days=day)
+    rec, _ = simulate_run(
+        PROGRAM,
+        machine,
+        SENSOR,
+        seed=2000 + day,
+        t0_ns=int(when.timestamp() * 1e9),
+        lead_in_s=1.0,
+        lead_out_s=1.0,
+    )
+    path = folder / f"night-{day:03d}.mcap"
+    write_mcap(rec, path)
+    return path
+
+
+def _folder(folder, extra="", alert_states=None):
+    text = MONITOR.format(program=folder / "program.toml").replace(NO_DIAGNOSTICS, "\n")
+    if alert_states is not None:
+        text = text.replace(
+            'states = ["ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline"]',
+            f'states = {alert_states!r}\nmode = "append"'.replace("'", '"'),
+        )
+    (folder / "program.toml").write_text(PROGRAM.to_toml())
+    (folder / "monitor.toml").write_text(text + extra)
+    return folder / "monitor.toml"
+
+
+@pytest.fixture(scope="module")
+def grown(tmp_path_factory):
+    """A 5-night baseline, then nights whose backlash grows 3 µm a week, judged nightly."""
+    folder = tmp_path_factory.mktemp("diagnostics")
+    config = _folder(folder, ALARMED, alert_states=["alarm"])  # the sink takes alarms only
+    runs = [str(backlash_night(folder, d)) for d in range(5)]
+    assert main(["baseline", "set", "--config", str(config), *runs]) == 0
+    records, codes = [], []
+    for day in range(5, 12):
+        grown_um = BACKLASH_UM + GROWTH_UM_PER_DAY * (day - 5)
+        code, record = judge(config, backlash_night(folder, day, grown_um))
+        records.append((day, grown_um, record))
+        codes.append(code)
+        if record["diagnostic_alarms"]:
+            break
+    return folder, records, codes
+
+
+@pytest.mark.slow
+def test_backlash_growing_3um_a_week_fires_its_alarm_while_the_squareness_stays_ok(grown):
+    folder, records, codes = grown
+    # the first night after the baseline has the baseline's backlash: no alarm
+    day, _, first = records[0]
+    assert first["diagnostics"]["backlash_x"]["state"] == "ok"
+    fired = [(day, um, r) for day, um, r in records if r["diagnostic_alarms"]]
+    assert fired, "a backlash growing 3 µm a week must fire its alarm within the week"
+    day, grown_um, record = fired[0]
+    assert 5 < day <= 5 + 7 and record["diagnostic_alarms"] == ["backlash_x"]
+    backlash = record["diagnostics"]["backlash_x"]
+    assert backlash["state"] == "alarm" and backlash["unit"] == "µm"
+    # the change seen is the growth put in
+    assert backlash["change"] == pytest.approx(grown_um - BACKLASH_UM, abs=0.1)
+    assert backlash["value"] == pytest.approx(grown_um, abs=0.1)
+    assert "diagnostic alarm: backlash_x" in record["verdict"]
+    # the alarm went where the squareness's alarms go (the sink takes alarms only): the
+    # night's alert alone, its state the squareness's
+    (alert,) = map(json.loads, (folder / "data" / "alert.json").read_text().splitlines())
+    assert alert["state"] == "ok" and "diagnostic alarm: backlash_x" in alert["verdict"]
+    # the squareness stays ok every night, and the exit code is the squareness's as before
+    assert [r["state"] for _, _, r in records] == ["ok"] * len(records)
+    assert codes == [EXIT_CODES["ok"]] * len(records)
+
+
+@pytest.mark.slow
+def test_every_valid_night_stores_every_diagnostic_named_or_not(grown):
+    folder, records, _ = grown
+    settings = DiagnosticSettings()
+    with open_history(folder / "history.db") as h:
+        runs = h.runs("m1")
+        fits = h.diagnostic_fits("m1", settings.key())
+    assert {r.id for r in runs} == set(fits) and len(runs) == 5 + len(records)
+    names = [d.name for d in diagnostics_of(DEFAULT_EFFECTS)]
+    for fit in fits.values():
+        assert fit.failure is None and fit.seconds > 0
+        assert [v.name for v in fit.values] == names
+        for v in fit.values:
+            # a diagnostic one circle test cannot see is stored with its reason
+            assert (v.value is None) == (v.missing_reason is not None)
+            if v.value is not None:
+                assert v.u_value > 0
+    # vibration and spikes the machine does not have: stored near zero, with their u
+    vib = [f.value("vibration_x") for f in fits.values()]
+    assert all(abs(v.value) < 5 * v.u_value for v in vib)
+
+
+@pytest.mark.slow
+def test_history_its_charts_and_the_report_show_each_diagnostic(grown, capsys):
+    folder, records, _ = grown
+    config = str(folder / "monitor.toml")
+    capsys.readouterr()
+    assert main(["history", "--config", config]) == 0
+    out = capsys.readouterr().out
+    table = out.split("\ndiagnostics\n")[1].splitlines()
+    assert "backlash_x µm" in table[0] and "servo_mismatch ms" in table[0]
+    assert len(table) == 1 + 5 + len(records) + 1  # header, nights, the alarm standing
+    assert table[-1].startswith("diagnostic alarms standing: backlash_x since")
+    assert table[-2].split()[3].endswith("!")  # the last night past backlash_x's limit
+    assert main(["history", "--config", config, "--plot", str(folder / "trend.png")]) == 0
+    assert (folder / "trend-diagnostics.png").stat().st_size > 10_000
+    capsys.readouterr()
+    report = (folder / "data" / "m1-report.html").read_text()
+    assert '<section id="diagnostics">' in report and "backlash_x" in report
+    assert 'src="data:image/png;base64,' in report.split('<section id="diagnostics">')[1]
+    assert (folder / "data" / "m1-diagnostics.png").is_file()
+    assert main(["history", "--config", config, "--json"]) == 0
+    record = json.loads(capsys.readouterr().out.splitlines()[-1])
+    assert set(record["diagnostics"]) == {d.name for d in diagnostics_of(DEFAULT_EFFECTS)}
+
+
+def test_a_failing_diagnostic_fit_keeps_the_night_and_notes_the_failure(
+    tmp_path, monkeypatch, capsys, caplog
+):
+    from imu_square.discrepancy import diagnose
+
+    config = _folder(tmp_path)
+
+    def broken(*args, **kwargs):
+        raise FloatingPointError("overflow encountered in multiply")
+
+    monkeypatch.setattr(diagnose, "fit_effects", broken)
+    code, record = judge(config, backlash_night(tmp_path, 0), capsys)
+    # no baseline yet: the squareness's verdict as before, the diagnostics missing
+    assert record["state"] == "no_baseline" and code == EXIT_CODES["no_baseline"]
+    reason = "the diagnostic fit failed: FloatingPointError: overflow encountered in multiply"
+    assert {d["missing_reason"] for d in record["diagnostics"].values()} == {reason}
+    assert reason in caplog.text  # the CLI's stderr
+    with open_history(tmp_path / "history.db") as h:
+        (run,) = h.runs("m1")
+        assert run.valid
+        fit = h.diagnostic_fits("m1", DiagnosticSettings().key())[run.id]
+    assert fit.failure == reason
+
+
+def test_bad_diagnostic_settings_are_one_line(tmp_path, capsys):
+    config = _folder(tmp_path, '\n[diagnostics]\neffects = ["backlash", "cyclic_error"]\n')
+    assert main(["history", "--config", str(config)]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "[diagnostics]" in err and "effects" in err and "'cyclic_error'" in err
+    config = _folder(tmp_path, '\n[diagnostics]\neffects = ["backlash"]\n' + ALARMED)
+    assert main(["history", "--config", str(config)]) == 0
+    config = _folder(tmp_path, '\n[diagnostics]\neffects = ["servo_mismatch"]\n' + ALARMED)
+    assert main(["history", "--config", str(config)]) != 0
+    err = capsys.readouterr().err.strip()
+    assert "[diagnostics.alarms]" in err and "backlash_x_um" in err
+
+
+@pytest.mark.slow
+def test_replay_rebuilds_an_archives_diagnostics_locally_and_on_dask(tmp_path, capsys):
+    config = _folder(tmp_path, "\n[diagnostics]\neffects = []\n")
+    archive = tmp_path / "archive"
+    archive.mkdir()
+    for day in range(4):
+        backlash_night(archive, day, BACKLASH_UM + day)
+    # the archive replayed without diagnostics: runs, no fits
+    assert main(["replay", "--config", str(config), str(archive)]) == 0
+    assert "4 analysed" in capsys.readouterr().out
+    settings = DiagnosticSettings()
+    with open_history(tmp_path / "history.db") as h:
+        assert h.diagnostic_fits("m1", settings.key()) == {}
+        run_ids = {r.recording_sha256: r.id for r in h.runs("m1")}
+    # with the default diagnostics: every run read again for them, its row kept
+    _folder(tmp_path)
+    values = {}
+    for engine, into in (([], "history.db"), (["--cluster", "local", "--jobs", "2"], "dask.db")):
+        argv = ["replay", "--config", str(config), str(archive), "--into", str(tmp_path / into)]
+        assert main([*argv, *engine]) == 0
+        assert "4 analysed" in capsys.readouterr().out
+        with open_history(tmp_path / into) as h:
+            fits = h.diagnostic_fits("m1", settings.key())
+            runs = {r.id: r.recording_sha256 for r in h.runs("m1")}
+        assert len(fits) == 4
+        values[into] = {
+            runs[i]: (f.value("backlash_x").value, f.value("backlash_x").u_value)
+            for i, f in fits.items()
+        }
+    assert set(values["history.db"]) == set(run_ids)
+    with open_history(tmp_path / "history.db") as h:
+        assert {r.recording_sha256: r.id for r in h.runs("m1")} == run_ids
+    # the same per-file function: the same numbers locally and on Dask
+    assert set(values["history.db"]) == set(values["dask.db"])
+    for sha, local in values["history.db"].items():
+        assert local == pytest.approx(values["dask.db"][sha], rel=1e-9)
+    assert sorted(v for v, _ in values["history.db"].values()) == pytest.approx(
+        [(BACKLASH_UM + d) * 1e-6 for d in range(4)], abs=0.1e-6
+    )
+    # everything stored: a second replay skips every file
+    assert main(["replay", "--config", str(config), str(archive)]) == 0
+    assert "4 skipped" in capsys.readouterr().out
+
+
+def test_every_diagnostic_is_made_of_sizes_its_effect_declares():
+    from imu_square.monitor.diagnostics.catalog import CATALOG
+    from imu_square.simulate.effects import SIZE, effect_parameters
+
+    for effect, diagnostics in CATALOG.items():
+        sizes = {p.name for p in effect_parameters(effect) if p.role == SIZE}
+        for d in diagnostics:
+            assert d.effect == effect and d.alarm_field == f"{d.name}_{d.suffix}"
+            assert {name for name, _ in d.terms} <= sizes, (d.name, sizes)
