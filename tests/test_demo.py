@@ -44,6 +44,10 @@ def test_the_demo_night_ends_in_a_verdict_a_chart_and_a_report(tmp_path, capsys)
     assert set(states[first:renewed]) == {"alarm"} and "alarm" not in states[renewed:]
     assert records[first]["change_urad"] > 2 * records[first]["u_change_urad"]
     assert states[demo.CUT_NIGHT] == "invalid"
+    # a night the verdict does not judge charts no diagnostic and raises no diagnostic alarm
+    for r in records:
+        if r["state"] == "invalid":
+            assert not r["diagnostics"] and "diagnostic alarm" not in r["verdict"], r["verdict"]
     # the demo's own settings cause no warning (its analysis follows its program)
     assert not [w for r in records for w in r["warnings"] if "cutoff" in w]
     assert all(states[n] == "invalid" for n in demo.COLD_NIGHTS if n >= demo.BASELINE_NIGHTS)

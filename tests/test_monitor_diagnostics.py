@@ -178,6 +178,37 @@ def test_a_failing_diagnostic_fit_keeps_the_night_and_notes_the_failure(
     assert fit.failure == reason
 
 
+@pytest.mark.parametrize("broken", ["nan value", "nan covariance", "infinite value"])
+def test_a_fit_without_finite_numbers_keeps_the_night(tmp_path, monkeypatch, capsys, broken):
+    import dataclasses
+    import math
+
+    from imu_square.discrepancy import diagnose
+    from imu_square.monitor.diagnostics.fit import NOT_FINITE
+    from imu_square.monitor.night import KEPT_NIGHTS
+
+    config = _folder(tmp_path, '\n[diagnostics]\neffects = ["backlash"]\n')
+    fit_effects = diagnose.fit_effects
+
+    def non_finite(*args, **kwargs):
+        fit = fit_effects(*args, **kwargs)
+        if broken == "nan covariance":
+            return dataclasses.replace(fit, covariance=fit.covariance * math.nan)
+        bad = math.nan if broken == "nan value" else math.inf
+        values = tuple(dataclasses.replace(v, value=bad) for v in fit.values)
+        return dataclasses.replace(fit, values=values)
+
+    monkeypatch.setattr(diagnose, "fit_effects", non_finite)
+    code, record = judge(config, backlash_night(tmp_path, 0), capsys)
+    # stored with its squareness verdict; the diagnostics missing, saying why
+    assert record["state"] == "no_baseline" and code == EXIT_CODES["no_baseline"]
+    assert {d["missing_reason"] for d in record["diagnostics"].values()} == {NOT_FINITE}
+    with open_history(tmp_path / "history.db") as h:
+        (run,) = h.runs("m1")
+        assert run.valid
+    assert not list(tmp_path.rglob(KEPT_NIGHTS))  # nothing left to store later
+
+
 def test_bad_diagnostic_settings_are_one_line(tmp_path, capsys):
     config = _folder(tmp_path, '\n[diagnostics]\neffects = ["backlash", "cyclic_error"]\n')
     assert main(["history", "--config", str(config)]) != 0
@@ -190,6 +221,11 @@ def test_bad_diagnostic_settings_are_one_line(tmp_path, capsys):
     assert main(["history", "--config", str(config)]) != 0
     err = capsys.readouterr().err.strip()
     assert "[diagnostics.alarms]" in err and "backlash_x_um" in err
+    # a step beyond what the effect's physical range can change is no design
+    huge = '\n[diagnostics]\neffects = ["backlash"]\n[diagnostics.alarms]\nbacklash_x_um = 1e308\n'
+    assert main(["history", "--config", str(_folder(tmp_path, huge))]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "backlash_x_um" in err and "200" in err
 
 
 @pytest.mark.slow
@@ -245,3 +281,34 @@ def test_every_diagnostic_is_made_of_sizes_its_effect_declares():
         for d in diagnostics:
             assert d.effect == effect and d.alarm_field == f"{d.name}_{d.suffix}"
             assert {name for name, _ in d.terms} <= sizes, (d.name, sizes)
+
+
+def test_a_diagnostic_whose_nights_scatter_is_designed_on_student_s_t():
+    import numpy as np
+    from scipy import stats
+
+    from imu_square.monitor.config import AlarmSettings
+    from imu_square.monitor.diagnostics.alarms import design_diagnostic_alarm, design_inputs
+    from imu_square.monitor.diagnostics.baseline import diagnostic_baseline
+
+    (backlash,) = [d for d in diagnostics_of(["backlash"]) if d.name == "backlash_x"]
+    alarms = AlarmSettings(monte_carlo_nights=100_000)
+    # six nights whose scatter (1 µm) dwarfs their own u (0.01 µm): sigma has 5 dof
+    values = 1e-6 * np.array([2.1, 0.4, 1.3, -0.6, 0.9, 2.4])
+    scattered = diagnostic_baseline(values, [1e-8] * 6)
+    assert scattered.nu == pytest.approx(5.0, rel=1e-3)
+    # nights that agree within their u: the normal
+    assert diagnostic_baseline([2e-6, 2e-6 + 1e-9], [1e-8] * 2).nu is None
+    t_design = design_diagnostic_alarm(design_inputs(backlash, scattered, 3e-6, alarms))
+    normal = design_diagnostic_alarm(
+        {**design_inputs(backlash, scattered, 3e-6, alarms), "nu": None}
+    )
+    assert t_design.nu == pytest.approx(5.0, rel=1e-3) and normal.nu is None
+    # a night's false alarm on its true law: the normal design on t(5) nights would fire
+    # its Shewhart chart 55 times as often as designed; the t design keeps to the design
+    p_t = 2 * stats.t.sf(t_design.shewhart.limit, 5)
+    p_normal = 2 * stats.norm.sf(normal.shewhart.limit)
+    p_wrong = 2 * stats.t.sf(normal.shewhart.limit, 5)
+    assert p_t < 3 * p_normal < p_wrong / 10
+    for t_chart, n_chart in zip(t_design.charts, normal.charts, strict=True):
+        assert t_chart.limit > n_chart.limit

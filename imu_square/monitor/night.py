@@ -375,7 +375,9 @@ def judge_history(config, history):
     earlier = {e.run_id: e for e in history.evaluations(machine) if e.baseline_id != current}
     runs = history.runs(machine, settings_hash=settings)
     assessment = judge_runs(runs, baseline_row, design, anchors, earlier)
-    trends = judge_diagnostics(history, runs, baseline_row, config.diagnostics, config.alarms)
+    # a night the verdict does not judge (a warming sensor, ...) charts no diagnostic either
+    judged = [n.run for n in assessment.nights if n.state != "invalid"]
+    trends = judge_diagnostics(history, judged, baseline_row, config.diagnostics, config.alarms)
     return replace(
         assessment, earlier=_earlier_periods(config, history, baseline_row), diagnostics=trends
     )

@@ -50,6 +50,7 @@ def design_inputs(diagnostic, baseline, step_si, alarms):
         "baseline_sd_ratio": min(baseline.u_value / diagnostic.scale / sigma, 2.0)
         if sigma > 0
         else 0.0,
+        "nu": baseline.nu,
         "false_alarm_nights": alarms.false_alarm_nights,
         "monte_carlo_nights": alarms.monte_carlo_nights,
     }
@@ -78,7 +79,7 @@ def design_diagnostic_alarm(inputs):
             inputs["false_alarm_nights"],
             inputs["sigma"] * URAD,
             step_rad=inputs["step"] * URAD,
-            nu=None,
+            nu=inputs["nu"],
             baseline_sd_ratio=inputs["baseline_sd_ratio"],
             ramp_rad=inputs["step"] * URAD,
             ramp_nights=RAMP_NIGHTS,

@@ -50,6 +50,18 @@ class DiagnosticBaseline:
     sigma: float
     n_nights: int
 
+    @property
+    def nu(self):
+        """Degrees of freedom of :attr:`sigma`; None where it is the nights' own ``u``.
+
+        ``between`` is estimated from :attr:`n_nights` nights, so where it
+        dominates a night's ``change / sigma`` follows Student's t, not the
+        normal (Welch-Satterthwaite, the nights' own ``u`` taken as exact).
+        """
+        if self.between == 0.0:
+            return None
+        return max(1.0, (self.n_nights - 1) * (self.sigma / self.between) ** 4)
+
 
 def diagnostic_baseline(values, uncertainties):
     """The baseline of a diagnostic from the baseline nights' values.

@@ -17,6 +17,7 @@ from imu_square.monitor.history.rows import DiagnosticFitRow, DiagnosticRow
 from imu_square.simulate.effects import effect_parameters
 
 NOT_IDENTIFIABLE = "not identifiable in this test"
+NOT_FINITE = "the diagnostic fit gave no finite value"
 
 
 def diagnose_recording(settings, recording, program, analysis):
@@ -98,5 +99,10 @@ def _diagnostic(diagnostic, fit):
         )
     value = float(coef @ np.array([fit.values[i].value for i in index]))
     cov = fit.covariance[np.ix_(index, index)]
-    u = math.sqrt(max(float(coef @ cov @ coef), 0.0))
+    variance = float(coef @ cov @ coef)
+    if not (math.isfinite(value) and math.isfinite(variance)):
+        return DiagnosticRow(
+            name=diagnostic.name, unit=diagnostic.si_unit, missing_reason=NOT_FINITE
+        )
+    u = math.sqrt(max(variance, 0.0))
     return DiagnosticRow(name=diagnostic.name, unit=diagnostic.si_unit, value=value, u_value=u)

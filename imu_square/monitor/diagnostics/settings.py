@@ -145,7 +145,7 @@ def diagnostics_from_mapping(table, source):
         error=MonitorConfigError,
     )
     steps = {
-        d.name: alarms.number(name, 0.0, None, lo_open=True) * d.scale
+        d.name: alarms.number(name, 0.0, _largest_change(d), lo_open=True) * d.scale
         for name, d in fields.items()
         if alarms.has(name)
     }
@@ -157,3 +157,13 @@ def _shape(table, p):
     if p.is_flag:
         return 1.0 if table.flag(p.name) else 0.0
     return table.number(p.name, p.low, p.high)
+
+
+def _largest_change(diagnostic):
+    """The largest change a diagnostic can make within its effect's physical ranges. [shown]"""
+    declared = {p.name: p for p in effect_parameters(diagnostic.effect)}
+    reach = sum(
+        abs(c) * max(abs(declared[name].low), abs(declared[name].high)) * declared[name].scale
+        for name, c in diagnostic.terms
+    )
+    return float(f"{2 * reach / diagnostic.scale:.6g}")

@@ -179,6 +179,7 @@ def _trend(history, diagnostic, runs, fits, baseline_row, step_si, alarms):
             design,
             [nights[i].change / diagnostic.scale * URAD for i in charted],
             [_night_u(nights[i], baseline) / diagnostic.scale * URAD for i in charted],
+            nu=design.nu,
         )
         for i, point in zip(charted, run.points, strict=True):
             state = point.state
@@ -243,14 +244,20 @@ def night_diagnostics(trends, run_id):
 
 def alarm_clause(trends, run_id):
     """What the verdict line adds for the diagnostics in alarm on a night ("" for none)."""
+    from imu_square.monitor.verdict import iso
+
     parts = []
     for t in trends:
         n = t.night_of(run_id)
         if n is not None and n.state == "alarm":
             d = t.diagnostic
+            standing = ""
+            if t.alarm_since_ns is not None and t.alarm_since_ns < (n.run.recorded_at_ns or 0):
+                since = iso(t.alarm_since_ns)[:10]
+                standing = f" (alarm since {since}, until a new baseline is set)"
             parts.append(
                 f"{d.name} {n.change / d.scale:+.3g} ± {n.u_change / d.scale:.2g} {d.unit} since "
-                f"the baseline"
+                f"the baseline{standing}"
             )
     return f"; diagnostic alarm: {', '.join(parts)}: check the machine" if parts else ""
 
