@@ -480,8 +480,9 @@ def _invalid(row):
 
 
 def _remount_reason(change):
+    # a controller's other ramps move eps_c too (0.05 deg on LinuxCNC's against ours)
     return (
-        f"the sensor was remounted: eps_c moved by "
+        f"the sensor was remounted, or the test's motion changed: eps_c moved by "
         f"{math.degrees(change.eps_c_shift_rad):+.3f} deg; set a new baseline"
     )
 
