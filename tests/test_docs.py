@@ -11,21 +11,19 @@ import functools
 import os
 import re
 import shlex
-import shutil
-import subprocess
 import sys
 from html.parser import HTMLParser
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 import pytest
+from headless_chromium import CHROMIUM, body_marks
 
 from imu_square.cli import build_parser, commands
 
 ROOT = Path(__file__).resolve().parents[1]
 SITE = ROOT / "docs" / "_build" / "html"
 README = ROOT / "README.md"
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.fixture(scope="module")
@@ -285,30 +283,9 @@ def _open_in_chromium(page, tmp_path):
     probed = page.with_name(f"probed-{page.name}")
     probed.write_text(page.read_text(encoding="utf-8").replace("</body>", PROBE), "utf-8")
     try:
-        proc = subprocess.run(
-            [
-                CHROMIUM,
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-                f"--user-data-dir={tmp_path / 'profile'}",
-                "--virtual-time-budget=10000",
-                "--dump-dom",
-                probed.as_uri(),
-            ],
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
+        return body_marks(probed, tmp_path / "profile")
     finally:
         probed.unlink()
-    body = re.search(r"<body([^>]*)>", proc.stdout)
-    assert body, proc.stderr[-2000:]
-    return dict(re.findall(r'data-([a-z-]+)="([^"]*)"', body.group(1))), proc.stdout
 
 
 @pytest.mark.slow

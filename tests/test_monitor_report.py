@@ -15,12 +15,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from headless_chromium import CHROMIUM, body_marks
 from monitor_rig import ALPHA, judge, make_base, night
 
 from imu_square.cli import main
 from imu_square.monitor.report.html import SECTIONS
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 PROBE = """<script>
 window.addEventListener("load", () => {
   const imgs = [...document.images];
@@ -71,28 +71,7 @@ def test_report_is_self_contained_and_renders_in_a_real_browser(machine, tmp_pat
         pytest.skip("no chromium to open the report (Debian package chromium; .ci/run installs it)")
     probed = tmp_path / "probed.html"
     probed.write_text(html.replace("</body>", PROBE), encoding="utf-8")
-    proc = subprocess.run(
-        [
-            CHROMIUM,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            f"--user-data-dir={tmp_path / 'profile'}",
-            "--virtual-time-budget=10000",
-            "--dump-dom",
-            probed.as_uri(),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    body = re.search(r"<body([^>]*)>", proc.stdout)
-    assert body, proc.stderr[-2000:]
-    marks = dict(re.findall(r'data-([a-z-]+)="([^"]*)"', body.group(1)))
+    marks, _ = body_marks(probed, tmp_path / "profile")
     assert marks["images"] == "3" and marks["images-ok"] == "3", marks
     assert set(marks["sections"].split(",")) == set(SECTIONS), marks
 
