@@ -27,8 +27,13 @@ def inline_quote(doc, start):
 
 def quoted_form(doc, start):
     """A pattern of the quote of ``doc`` beginning with ``start``: its form, any figures."""
+    return form_of(inline_quote(doc, start))
+
+
+def form_of(quote):
+    """A pattern of a quoted output: its words, any figures (dates too) where it has figures."""
     out = []
-    for part in re.split(rf"(\.\.\.|{_NUMBER})", inline_quote(doc, start)):
+    for part in re.split(rf"(\.\.\.|{_NUMBER})", quote):
         if part == "...":
             out.append(".*?")
         elif re.fullmatch(_NUMBER, part):
