@@ -21,6 +21,7 @@ import warnings
 import numpy as np
 import pytest
 from acq_board import PROGRAM, make_pty, write_inputs
+from doc_quotes import quoted_form
 
 from acquisition.faults import SENT
 from acquisition.protocol import DeviceHeader, SampleBlock, encode_block, encode_header
@@ -178,6 +179,8 @@ def test_a_board_killed_during_the_run_leaves_a_tail_gap_up_to_the_planned_stop(
         f"run        INCOMPLETE: the last {lost * dt_s:.3f} s ({lost} samples) are missing "
         f"(port lost) (stop: port lost)" in text
     )
+    # the line as the user guide quotes it
+    assert quoted_form("docs/user-guide/hardware.md", "run  INCOMPLETE:").search(text)
     with warnings.catch_warnings():
         warnings.simplefilter("always", ImuSquareWarning)  # printed by the CLI, on one line
         code = main(["analyze", str(out), "--bootstrap", "0"])

@@ -8,11 +8,16 @@ not judged.
 """
 
 import json
+import re
+from pathlib import Path
 
 import pytest
+from doc_quotes import form_of
 
 from imu_square.cli import main
 from imu_square.monitor import demo
+
+README = Path(__file__).resolve().parents[1] / "README.md"
 
 
 @pytest.mark.slow
@@ -72,4 +77,10 @@ def test_the_demo_night_ends_in_a_verdict_a_chart_and_a_report(tmp_path, capsys)
     fired = [i for i, r in enumerate(records) if "backlash_x" in r["diagnostic_alarms"]]
     assert fired and states[fired[0]] == "ok"
     assert "backlash_x" in tonight["diagnostic_alarms"]
+    # the verdict line the README shows is of tonight's form (a standing alarm adds its date)
+    shown = re.search(r"^    (demo-mill: .*)$", README.read_text("utf-8"), re.M).group(1)
+    line = f"{tonight['machine_id']}: {tonight['verdict']}"
+    line = re.sub(r" \(alarm since \d{4}-\d\d-\d\d, until a new baseline is set\)", "", line)
+    if tonight["state"] == "ok":
+        assert form_of(shown).fullmatch(line), (shown, line)
     assert (data / f"{demo.MACHINE_ID}-diagnostics.png").stat().st_size > 10_000

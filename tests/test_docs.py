@@ -162,7 +162,8 @@ def test_the_readme_verdict_has_the_form_the_monitor_prints():
     assert line, "the README shows the demo's verdict line"
     form = (
         rf"{demo.MACHINE_ID}: squareness unchanged \([+-]\d+\.\d ± \d+\.\d µm/m \(k=1\) "
-        r"since the baseline of \d{4}-\d\d-\d\d\)"
+        r"since the baseline of \d{4}-\d\d-\d\d\); diagnostic alarm: backlash_x "
+        r"[+-]\d+\.\d+ ± \d+\.\d+ µm since the baseline: check the machine"
     )
     assert re.fullmatch(form, line.group(1)), line.group(1)
 

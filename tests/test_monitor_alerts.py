@@ -311,3 +311,12 @@ def test_shell_metacharacters_in_every_field_of_every_sink_arrive_verbatim_and_r
     # And nothing ran.
     assert not (tmp_path / "pwned").exists() and not Path("pwned").exists()
     assert (victim / "keep").read_text() == "still here"
+
+
+def test_the_user_guide_lists_the_fields_every_sink_sends():
+    guide = Path(__file__).resolve().parents[1] / "docs" / "user-guide" / "alerts-metrics.md"
+    said = " ".join(guide.read_text(encoding="utf-8").split())
+    listed = re.search(r"Every sink sends the same JSON object: (.*?)\. ", said).group(1)
+    sent = make_alert({"run_id": 1}, machine_id="mill-3", state="ok", verdict="v").as_dict()
+    assert set(re.findall(r"`([a-z_]+)`", listed)) == set(sent)
+    assert f"`schema` (`{sent['schema']}`)" in listed

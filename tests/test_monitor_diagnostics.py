@@ -13,6 +13,7 @@ import json
 from datetime import timedelta
 
 import pytest
+from doc_quotes import quoted_form
 from monitor_rig import ALPHA, MONITOR, NO_DIAGNOSTICS, PROGRAM, SENSOR, START, judge
 
 from imu_square.cli import main
@@ -99,6 +100,9 @@ def test_backlash_growing_3um_a_week_fires_its_alarm_while_the_squareness_stays_
     assert backlash["change"] == pytest.approx(grown_um - BACKLASH_UM, abs=0.1)
     assert backlash["value"] == pytest.approx(grown_um, abs=0.1)
     assert "diagnostic alarm: backlash_x" in record["verdict"]
+    # the clause as the user guide quotes it
+    clause = quoted_form("docs/user-guide/diagnostics.md", "...; diagnostic alarm:")
+    assert clause.search(record["verdict"]), (clause.pattern, record["verdict"])
     # the alarm went where the squareness's alarms go (the sink takes alarms only): the
     # night's alert alone, its state the squareness's
     (alert,) = map(json.loads, (folder / "data" / "alert.json").read_text().splitlines())

@@ -14,6 +14,7 @@ uncertainty, where the uncorrected one is hundreds of µm/m.
 import math
 from dataclasses import replace
 from datetime import timedelta
+from pathlib import Path
 
 import pytest
 from monitor_rig import ALPHA, MONITOR, PROGRAM, SENSOR, START, judge
@@ -24,6 +25,8 @@ from imu_square.program import program_from_mapping
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.machine import MachineModel
 from imu_square.simulate.run import simulate_run
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "user-guide"
 
 LONG = program_from_mapping(
     {"radius_mm": 25.0, "feed_mm_per_min": 9000.0, "cycles_per_direction": 15, "dwell_s": 0.5}
@@ -83,6 +86,11 @@ def test_a_short_run_just_after_power_on_is_not_judged(tmp_path, capsys):
     _, record = judge(config, path, capsys)
     assert offset_urad(truth) > 500
     assert record["state"] == "invalid" and "°C/min" in record["verdict"], record
+    # the reason as the user guide quotes it
+    said = "the sensor was still warming up"
+    assert f"not judged: {said} (" in record["verdict"], record["verdict"]
+    for page in ("troubleshooting.md", "hardware.md", "reading-results.md"):
+        assert f'"{said}"' in (DOCS / page).read_text(encoding="utf-8"), page
 
 
 @pytest.mark.slow

@@ -224,3 +224,17 @@ def test_the_metrics_section_of_the_monitor_file():
         MonitorConfigError, match=r"\[metrics\] is missing the required field 'textfile'"
     ):
         metrics_from_mapping({}, "monitor.toml")
+
+
+def test_the_user_guide_lists_the_metrics_the_file_holds_with_their_types():
+    guide = Path(__file__).resolve().parents[1] / "docs" / "user-guide" / "alerts-metrics.md"
+    documented = {}
+    for names, kind in re.findall(
+        r"^\| (`imu_square_.*?) \| (gauge|counter) \|", guide.read_text(), re.M
+    ):
+        for name in re.findall(r"`(imu_square_\w+)", names):
+            documented[name] = kind
+    text = render_metrics(FULL)
+    written = dict(re.findall(r"^# TYPE (\w+) (\w+)$", text, re.M))
+    assert documented == written
+    assert {name for name, _, _ in samples(text)} == set(written)

@@ -24,6 +24,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
 from imu_square.monitor.baseline_setup import set_baseline
 from imu_square.monitor.config import read_monitor
@@ -110,6 +111,12 @@ with config.open_history() as history:
         outcome = judge_recording(config, history, path, program)
         print(f"night {night:2d}: {outcome.verdict}")
         nights.append((night, outcome.record, outcome.state))
+
+# %%
+# The baseline and the alarm design the monitor made for it, as
+# ``imu-square baseline show --config monitor.toml`` prints them:
+
+main(["baseline", "show", "--config", str(folder / "monitor.toml")])
 
 # %%
 # The verdicts above are the lines a maintenance engineer reads in the

@@ -192,6 +192,11 @@ class DiscrepancyResult:
 
         It never says the model explains the recording while a view's gap stays
         above its null after the last step.
+
+        Returns
+        -------
+        str
+            The line ``discrepancy`` prints first.
         """
         named = list(self.named_effects) + ["one of " + " | ".join(g) for g in self.ambiguous]
         if not self.gap_left:
@@ -215,7 +220,13 @@ class DiscrepancyResult:
         return 1 if self.named_effects or self.ambiguous else 0
 
     def to_json_dict(self):
-        """The result as JSON-ready values (the keys of docs/discrepancy.md)."""
+        """The result as JSON-ready values (the keys of docs/discrepancy.md).
+
+        Returns
+        -------
+        dict of str to object
+            What ``discrepancy --json`` prints.
+        """
         return {
             "headline": self.headline(),
             "explained": self.explained,
@@ -242,7 +253,13 @@ class DiscrepancyResult:
         }
 
     def summary(self):
-        """Human-readable lines: headline, noise floor, steps, gaps per view, gaps left."""
+        """Human-readable lines: headline, noise floor, steps, gaps per view, gaps left.
+
+        Returns
+        -------
+        str
+            The lines, joined by newlines.
+        """
         d = np.asarray(self.noise["density_m_s2_rthz"]) / UG
         lines = [
             self.headline(),

@@ -82,7 +82,13 @@ class DiscrepancyOptions:
     analysis: AnalysisOptions = field(default_factory=lambda: AnalysisOptions(bootstrap_n=0))
 
     def candidates(self):
-        """The allowed effects, checked against the vocabulary."""
+        """The allowed effects, checked against the vocabulary.
+
+        Returns
+        -------
+        tuple of str
+            The names of the effects, all of them when ``effects`` is None.
+        """
         if self.effects is None:
             return tuple(EFFECTS)
         names = tuple(dict.fromkeys(parse_effects(self.effects)))

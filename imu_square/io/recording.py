@@ -222,5 +222,17 @@ class Recording:
         return self.lost_samples + sum(self.tail_gaps())
 
     def with_processing(self, step, **changes):
-        """A copy with ``changes`` applied and ``step`` appended to the processing log."""
+        """A copy with ``changes`` applied and ``step`` appended to the processing log.
+
+        Parameters
+        ----------
+        step : str
+            The processing step, in words, for the log.
+        **changes
+            Fields to replace, as :func:`dataclasses.replace` takes them.
+
+        Returns
+        -------
+        Recording
+        """
         return replace(self, processing=[*self.processing, step], **changes)

@@ -79,11 +79,22 @@ class AnalysisOptions:
             )
 
     def robust_norm(self):
-        """The robust norm these options name (a ``statsmodels`` norm)."""
+        """The robust norm these options name.
+
+        Returns
+        -------
+        statsmodels.robust.norms.RobustNorm
+        """
         return robust_norm(self.norm, self.tuning)
 
     def irls(self):
-        """Keyword options of :func:`imu_square.pipeline.sine_fit.fit_irls`."""
+        """Keyword options of :func:`imu_square.pipeline.sine_fit.fit_irls`.
+
+        Returns
+        -------
+        dict of str to object
+            ``maxiter``, ``tol``, ``conv`` and ``freeze_scale_after``.
+        """
         return {
             "maxiter": self.maxiter,
             "tol": self.tol,

@@ -295,6 +295,7 @@ class TestProgram:
         Returns
         -------
         list of BlockPlan
+            One plan per block, in the order the machine runs them.
         """
         plans = []
         angle = self.start_angle_rad
@@ -323,7 +324,13 @@ class TestProgram:
         return plans
 
     def describe(self):
-        """The circle in a few words: radius, feed(s) and cycles each way."""
+        """The circle in a few words: radius, feed(s) and cycles each way.
+
+        Returns
+        -------
+        str
+            For example ``r = 100 mm at 6000 mm/min, 15 cycles each way``.
+        """
         from imu_square.units import MM, MM_PER_MIN
 
         feeds = " and ".join(f"{v / MM_PER_MIN:g}" for v in self.feeds)
@@ -332,7 +339,13 @@ class TestProgram:
         return f"r = {self.radius_m / MM:g} mm at {feeds} mm/min, {cycles} cycles each way{runs}"
 
     def to_mapping(self):
-        """The program as a ``[program]`` table in file units (mm, mm/min, degrees)."""
+        """The program as a ``[program]`` table in file units (mm, mm/min, degrees).
+
+        Returns
+        -------
+        dict of str to object
+            The fields of the program file and their values.
+        """
         if self.n_feeds > 1:
             feed = {"feeds_mm_per_min": [v * 6e4 for v in self.feeds]}
         else:
@@ -351,14 +364,26 @@ class TestProgram:
         }
 
     def to_toml(self):
-        """The program as TOML text that :func:`read_program` reads back exactly."""
+        """The program as TOML text that :func:`read_program` reads back exactly.
+
+        Returns
+        -------
+        str
+            The ``[program]`` table, one field a line.
+        """
         lines = ["[program]"]
         for key, value in self.to_mapping().items():
             lines.append(f"{key} = {_toml_value(value)}")
         return "\n".join(lines) + "\n"
 
     def as_dict(self):
-        """All fields in SI units, for JSON."""
+        """All fields in SI units, for JSON.
+
+        Returns
+        -------
+        dict of str to object
+            Every field of the program by its name.
+        """
         return asdict(self)
 
 
