@@ -20,6 +20,7 @@ import contextlib
 import glob
 import hashlib
 import os
+import shutil
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -141,14 +142,6 @@ def expand_paths(items):
     return sorted(found)
 
 
-def _sha256_local(path):
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def _localise(path):
     """A local file for ``path``: itself, or a temporary copy of an fsspec URL."""
     if "://" not in path:
@@ -163,8 +156,7 @@ def _localise(path):
 
     fd, local = tempfile.mkstemp(suffix=".mcap", prefix="imu-square-replay-")
     with os.fdopen(fd, "wb") as out, fsspec.open(path, "rb") as src:
-        while chunk := src.read(1 << 20):
-            out.write(chunk)
+        shutil.copyfileobj(src, out)
     return local, local
 
 
@@ -191,7 +183,8 @@ def replay_file(path, job, known=frozenset()):
     local, temporary = None, None
     try:
         local, temporary = _localise(path)
-        sha = _sha256_local(local)
+        with open(local, "rb") as f:
+            sha = hashlib.file_digest(f, "sha256").hexdigest()
         if sha in known:
             return FileOutcome(path, "skipped", sha, seconds=time.perf_counter() - start)
         # a file that cannot be read is counted as failed, never stored as a run

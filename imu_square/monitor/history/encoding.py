@@ -71,14 +71,11 @@ def file_sha256(path):
     str
         64 lower-case hexadecimal digits.
     """
-    digest = hashlib.sha256()
     try:
         with open(path, "rb") as f:
-            while chunk := f.read(1 << 20):
-                digest.update(chunk)
+            return hashlib.file_digest(f, "sha256").hexdigest()
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read the recording: {exc.strerror}") from None
-    return digest.hexdigest()
 
 
 def ns_from_datetime(when):
