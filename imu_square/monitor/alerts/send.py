@@ -265,12 +265,8 @@ def send_without_history(config, record, *, machine_id, state, verdict):
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict)
     outcomes = []
     for sink in (s for s in config.sinks if sink_takes(s, state, record)):
-        if sink.kind == "log":
-            sink.deliver(alert)
-            result = ("sent", 1, None)
-        else:
-            deadline = time.monotonic() + config.retry.max_total_s
-            result = _try(sink, alert, config.retry, deadline, config.retry.attempts)
+        deadline = time.monotonic() + config.retry.max_total_s
+        result = _try(sink, alert, config.retry, deadline, config.retry.attempts)
         outcomes.append(SinkOutcome(sink.name, alert.alert_id, state, *result))
     return AlertReport(alert, tuple(outcomes), ())
 
