@@ -8,7 +8,6 @@ logged, not raised.
 
 import math
 from dataclasses import dataclass
-from datetime import UTC
 from pathlib import Path
 
 from imu_square.errors import ImuSquareError, ImuSquareWarning
@@ -129,9 +128,7 @@ def metrics_snapshot(assessment):
     last_valid = valid[-1] if valid else None
 
     def when(night):
-        if night is None or night.run.recorded_at_ns is None:
-            return None
-        return datetime_from_ns(night.run.recorded_at_ns).astimezone(UTC)
+        return None if night is None else datetime_from_ns(night.run.recorded_at_ns)
 
     return MetricsSnapshot(
         machine_id=assessment.machine_id,
