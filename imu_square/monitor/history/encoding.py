@@ -93,8 +93,7 @@ def ns_from_datetime(when):
     """
     if not isinstance(when, datetime) or when.utcoffset() is None:
         raise HistoryError(f"a time must be a datetime with its time zone, got {when!r}")
-    delta = when - _EPOCH
-    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+    return (when - _EPOCH) // timedelta(microseconds=1) * 1000
 
 
 def datetime_from_ns(ns):
