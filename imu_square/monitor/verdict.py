@@ -44,7 +44,6 @@ from imu_square.monitor.history.encoding import datetime_from_ns
 from imu_square.monitor.stats.baseline import Baseline, RunValue, change_since
 from imu_square.units import URAD
 
-STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
 # The pooled within-night temperature slope corrects the nights past this many standard
 # errors (a false correction one night in 370).
 DRIFT_SIGNIFICANCE = 3.0
@@ -107,7 +106,7 @@ class Night:
     run : RunRow
         The stored run.
     state : str
-        One of :data:`STATES`.
+        One of :data:`~imu_square.monitor.history.rows.EVALUATION_STATES`.
     change_rad, u_change_rad : float
         Change of the machine's squareness since the baseline and its standard
         uncertainty, baseline's included; NaN when there is none. [rad]
