@@ -22,14 +22,13 @@ import hashlib
 import os
 import shutil
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import AnalysisSettings
 from imu_square.monitor.diagnostics.settings import DiagnosticSettings
 from imu_square.monitor.history.encoding import first_line
-from imu_square.monitor.history.rows import RunRow
 
 STATUSES = ("analysed", "invalid", "skipped", "failed")
 
@@ -81,8 +80,8 @@ class FileOutcome:
         hashed (unreadable); an unanalysable recording is ``invalid``.
     sha256 : str
         The file's SHA-256, "" if unreadable.
-    row : dict or None
-        The history row's fields (:class:`~.rows.RunRow`), None when skipped or failed.
+    row : RunRow or None
+        The history row, None when skipped or failed.
     diagnostics : DiagnosticFitRow or None
         The run's diagnostic fit, its run left for the store; None for an
         invalid run, without a diagnostic set, or when skipped or failed.
@@ -95,7 +94,7 @@ class FileOutcome:
     path: str
     status: str
     sha256: str = ""
-    row: dict | None = None
+    row: object = None
     diagnostics: object = None
     reason: str = ""
     seconds: float = 0.0
@@ -191,14 +190,13 @@ def replay_file(path, job, known=frozenset()):
         row, result, diagnostics = recording_row(
             job, local, job.program, sha, keep_unreadable=False
         )
-        values = {f.name: getattr(row, f.name) for f in fields(RunRow)}
-        values["recording_path"] = path
+        row = replace(row, recording_path=path)
         status = "analysed" if result is not None else "invalid"
         return FileOutcome(
             path,
             status,
             sha,
-            values,
+            row,
             diagnostics,
             row.invalid_reason or "",
             seconds=time.perf_counter() - start,
@@ -427,4 +425,4 @@ def store_outcome(history, outcome):
     """
     from imu_square.monitor.night import store_run
 
-    return store_run(history, RunRow(**outcome.row), outcome.diagnostics)
+    return store_run(history, outcome.row, outcome.diagnostics)
