@@ -169,21 +169,12 @@ def write_night_outputs(config, history, outcome, out_dir):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     assessment = outcome.assessment
-    trend = out_dir / f"{config.machine_id}-trend.png"
-    report = out_dir / f"{config.machine_id}-report.html"
-    try:
-        plot_trend(assessment, trend)
-    except (OSError, ValueError) as exc:
-        logger.warning("%s: trend chart not written: %s", trend, exc)
-        trend = None
+    trend = _chart(plot_trend, assessment, out_dir / f"{config.machine_id}-trend.png", "trend")
     diagnostics = None
     if assessment.diagnostics:
-        diagnostics = out_dir / f"{config.machine_id}-diagnostics.png"
-        try:
-            plot_diagnostics(assessment, diagnostics)
-        except (OSError, ValueError) as exc:
-            logger.warning("%s: diagnostics chart not written: %s", diagnostics, exc)
-            diagnostics = None
+        path = out_dir / f"{config.machine_id}-diagnostics.png"
+        diagnostics = _chart(plot_diagnostics, assessment, path, "diagnostics")
+    report = out_dir / f"{config.machine_id}-report.html"
     try:
         last, title = last_valid_result(assessment, config.analysis.options())
         write_report(report, render_report(assessment, last, title))
@@ -207,3 +198,13 @@ def write_night_outputs(config, history, outcome, out_dir):
         except ImuSquareError as exc:
             logger.error("alerts not sent now (%s): they stay pending in the history", exc)
     return NightFiles(trend, report, metrics, alerts, diagnostics)
+
+
+def _chart(plot, assessment, path, what):
+    """``path`` once ``plot`` has drawn it; None, said, when it could not."""
+    try:
+        plot(assessment, path)
+    except (OSError, ValueError) as exc:
+        logger.warning("%s: %s chart not written: %s", path, what, exc)
+        return None
+    return path
