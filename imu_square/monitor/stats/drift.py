@@ -86,23 +86,6 @@ class DriftFit:
         """Whether the slope differs from zero at :data:`SIGNIFICANCE`."""
         return bool(self.p_value < SIGNIFICANCE)
 
-    def corrected(self, value_rad, x):
-        """A value measured at ``x`` corrected to :attr:`reference`.
-
-        Parameters
-        ----------
-        value_rad : float or ndarray
-            ``theta_y - theta_x`` as measured. [rad]
-        x : float or ndarray
-            The drift variable when it was measured. [degC or s]
-
-        Returns
-        -------
-        float or ndarray
-            ``value - b (x - x_ref)``. [rad]
-        """
-        return value_rad - self.slope_rad_per_unit * (np.asarray(x) - self.reference)
-
     def to_json_dict(self):
         """JSON-ready, angles in µrad, with :attr:`significant`."""
         return json_safe(self, urad=True) | {"significant": self.significant}
