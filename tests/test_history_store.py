@@ -21,21 +21,22 @@ from hypothesis import strategies as st
 
 from imu_square.errors import HistoryError, ImuSquareError
 from imu_square.monitor.history import store
-from imu_square.monitor.history.encoding import canonical_json
-from imu_square.monitor.history.rows import RUN_FLOAT_FIELDS
-from imu_square.monitor.history.sql import Params
-from imu_square.monitor.history.store import (
+from imu_square.monitor.history.encoding import (
+    canonical_json,
+    datetime_from_ns,
+    file_sha256,
+    ns_from_datetime,
+    settings_hash,
+)
+from imu_square.monitor.history.rows import (
     EVALUATION_STATES,
+    RUN_FLOAT_FIELDS,
     AnchorRow,
     BaselineRow,
     EvaluationRow,
-    datetime_from_ns,
-    default_history_path,
-    file_sha256,
-    ns_from_datetime,
-    open_history,
-    settings_hash,
 )
+from imu_square.monitor.history.sql import Params
+from imu_square.monitor.history.store import default_history_path, open_history
 
 HOUR_NS = 3600 * 10**9
 

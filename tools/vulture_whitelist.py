@@ -33,6 +33,7 @@ _.u_warning_fraction
 _.u_arl1
 _.u_arl1_steady
 # monitor.stats.drift.DriftFit: to_json_dict by asdict (stored with each run).
+_.slope_rad_per_unit
 _.u_slope_rad_per_unit
 _.value_at_reference_rad
 _.u_value_at_reference_rad

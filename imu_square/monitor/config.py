@@ -43,6 +43,7 @@ file, as ``imu-square init`` writes it::
 The history's per-user default is :func:`imu_square.monitor.history.store.default_history_path`.
 """
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -67,7 +68,7 @@ SECTIONS = (
     "alerts",
     "metrics",
 )
-_MACHINE_ID_CHARS = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_.-")
+_MACHINE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 
 @dataclass(frozen=True)
@@ -337,11 +338,7 @@ def monitor_from_mapping(doc, path):
 
     mon = table("monitor", ("machine_id", "history", "data_dir", "busy_timeout_s"))
     machine_id = mon.text("machine_id")
-    if (
-        not set(machine_id) <= _MACHINE_ID_CHARS
-        or len(machine_id) > 64
-        or not machine_id[0].isalnum()
-    ):
+    if not _MACHINE_ID.fullmatch(machine_id):
         mon.fail(
             "machine_id",
             "1-64 letters, digits, '_', '.' or '-', starting with a letter or digit",

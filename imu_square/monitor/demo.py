@@ -186,7 +186,6 @@ def seed_history(config, history, now=None, progress=None, motion=None):
     """
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.baseline_setup import set_baseline
-    from imu_square.monitor.history.rows import RunRow
     from imu_square.monitor.night import judge_recording, store_run
     from imu_square.monitor.replay import ReplayJob, run_local
     from imu_square.simulate import read_sensor, simulate_run
@@ -234,7 +233,7 @@ def seed_history(config, history, now=None, progress=None, motion=None):
     for outcome in run_local(paths, job):
         if outcome.row is None:
             raise ImuSquareError(f"{outcome.path}: {outcome.reason}")
-        made[outcome.path] = (RunRow(**outcome.row), None, outcome.diagnostics)
+        made[outcome.path] = (outcome.row, None, outcome.diagnostics)
     baseline_runs, repaired = [], []
     for night, path in enumerate(paths):
         if night < BASELINE_NIGHTS:

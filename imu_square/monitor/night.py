@@ -54,7 +54,7 @@ class NightOutcome:
     inserted : bool
         False when the same recording under the same settings was there already.
     state : str
-        The verdict's state (:data:`~imu_square.monitor.verdict.STATES`).
+        The verdict's state (:data:`~imu_square.monitor.history.rows.EVALUATION_STATES`).
     verdict : str
         The one line a user reads in the morning.
     record : dict

@@ -8,7 +8,6 @@ logged, not raised.
 
 import math
 from dataclasses import dataclass
-from datetime import UTC
 from pathlib import Path
 
 from imu_square.errors import ImuSquareError, ImuSquareWarning
@@ -129,9 +128,7 @@ def metrics_snapshot(assessment):
     last_valid = valid[-1] if valid else None
 
     def when(night):
-        if night is None or night.run.recorded_at_ns is None:
-            return None
-        return datetime_from_ns(night.run.recorded_at_ns).astimezone(UTC)
+        return None if night is None else datetime_from_ns(night.run.recorded_at_ns)
 
     return MetricsSnapshot(
         machine_id=assessment.machine_id,
@@ -172,21 +169,12 @@ def write_night_outputs(config, history, outcome, out_dir):
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     assessment = outcome.assessment
-    trend = out_dir / f"{config.machine_id}-trend.png"
-    report = out_dir / f"{config.machine_id}-report.html"
-    try:
-        plot_trend(assessment, trend)
-    except (OSError, ValueError) as exc:
-        logger.warning("%s: trend chart not written: %s", trend, exc)
-        trend = None
+    trend = _chart(plot_trend, assessment, out_dir / f"{config.machine_id}-trend.png", "trend")
     diagnostics = None
     if assessment.diagnostics:
-        diagnostics = out_dir / f"{config.machine_id}-diagnostics.png"
-        try:
-            plot_diagnostics(assessment, diagnostics)
-        except (OSError, ValueError) as exc:
-            logger.warning("%s: diagnostics chart not written: %s", diagnostics, exc)
-            diagnostics = None
+        path = out_dir / f"{config.machine_id}-diagnostics.png"
+        diagnostics = _chart(plot_diagnostics, assessment, path, "diagnostics")
+    report = out_dir / f"{config.machine_id}-report.html"
     try:
         last, title = last_valid_result(assessment, config.analysis.options())
         write_report(report, render_report(assessment, last, title))
@@ -210,3 +198,13 @@ def write_night_outputs(config, history, outcome, out_dir):
         except ImuSquareError as exc:
             logger.error("alerts not sent now (%s): they stay pending in the history", exc)
     return NightFiles(trend, report, metrics, alerts, diagnostics)
+
+
+def _chart(plot, assessment, path, what):
+    """``path`` once ``plot`` has drawn it; None, said, when it could not."""
+    try:
+        plot(assessment, path)
+    except (OSError, ValueError) as exc:
+        logger.warning("%s: %s chart not written: %s", path, what, exc)
+        return None
+    return path

@@ -20,15 +20,15 @@ import contextlib
 import glob
 import hashlib
 import os
+import shutil
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from imu_square.errors import ImuSquareError
 from imu_square.monitor.config import AnalysisSettings
 from imu_square.monitor.diagnostics.settings import DiagnosticSettings
 from imu_square.monitor.history.encoding import first_line
-from imu_square.monitor.history.rows import RunRow
 
 STATUSES = ("analysed", "invalid", "skipped", "failed")
 
@@ -80,8 +80,8 @@ class FileOutcome:
         hashed (unreadable); an unanalysable recording is ``invalid``.
     sha256 : str
         The file's SHA-256, "" if unreadable.
-    row : dict or None
-        The history row's fields (:class:`~.rows.RunRow`), None when skipped or failed.
+    row : RunRow or None
+        The history row, None when skipped or failed.
     diagnostics : DiagnosticFitRow or None
         The run's diagnostic fit, its run left for the store; None for an
         invalid run, without a diagnostic set, or when skipped or failed.
@@ -94,7 +94,7 @@ class FileOutcome:
     path: str
     status: str
     sha256: str = ""
-    row: dict | None = None
+    row: object = None
     diagnostics: object = None
     reason: str = ""
     seconds: float = 0.0
@@ -141,14 +141,6 @@ def expand_paths(items):
     return sorted(found)
 
 
-def _sha256_local(path):
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            digest.update(chunk)
-    return digest.hexdigest()
-
-
 def _localise(path):
     """A local file for ``path``: itself, or a temporary copy of an fsspec URL."""
     if "://" not in path:
@@ -163,8 +155,7 @@ def _localise(path):
 
     fd, local = tempfile.mkstemp(suffix=".mcap", prefix="imu-square-replay-")
     with os.fdopen(fd, "wb") as out, fsspec.open(path, "rb") as src:
-        while chunk := src.read(1 << 20):
-            out.write(chunk)
+        shutil.copyfileobj(src, out)
     return local, local
 
 
@@ -191,21 +182,21 @@ def replay_file(path, job, known=frozenset()):
     local, temporary = None, None
     try:
         local, temporary = _localise(path)
-        sha = _sha256_local(local)
+        with open(local, "rb") as f:
+            sha = hashlib.file_digest(f, "sha256").hexdigest()
         if sha in known:
             return FileOutcome(path, "skipped", sha, seconds=time.perf_counter() - start)
         # a file that cannot be read is counted as failed, never stored as a run
         row, result, diagnostics = recording_row(
             job, local, job.program, sha, keep_unreadable=False
         )
-        values = {f.name: getattr(row, f.name) for f in fields(RunRow)}
-        values["recording_path"] = path
+        row = replace(row, recording_path=path)
         status = "analysed" if result is not None else "invalid"
         return FileOutcome(
             path,
             status,
             sha,
-            values,
+            row,
             diagnostics,
             row.invalid_reason or "",
             seconds=time.perf_counter() - start,
@@ -434,4 +425,4 @@ def store_outcome(history, outcome):
     """
     from imu_square.monitor.night import store_run
 
-    return store_run(history, RunRow(**outcome.row), outcome.diagnostics)
+    return store_run(history, outcome.row, outcome.diagnostics)

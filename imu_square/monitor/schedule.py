@@ -166,11 +166,6 @@ def check_time(text):
     return int(m.group(1)), int(m.group(2))
 
 
-def unit_name(machine_id):
-    """Base name of the systemd units of one machine's monitor."""
-    return f"imu-square-nightly-{machine_id}"
-
-
 def systemd_units(machine_id, executable, monitor_file, at="02:30", user=None):
     """A systemd service and timer that run ``nightly`` at a time each night.
 
@@ -193,7 +188,7 @@ def systemd_units(machine_id, executable, monitor_file, at="02:30", user=None):
         ``{"NAME.service": text, "NAME.timer": text}``.
     """
     hour, minute = check_time(at)
-    name = unit_name(machine_id)
+    name = f"imu-square-nightly-{machine_id}"
     success = " ".join(str(EXIT_CODES[s]) for s in _QUIET_STATES if EXIT_CODES[s])
     command = " ".join(
         _systemd_quote(a) for a in (str(executable), "nightly", "--config", str(monitor_file))

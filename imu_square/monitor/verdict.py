@@ -44,7 +44,6 @@ from imu_square.monitor.history.encoding import datetime_from_ns
 from imu_square.monitor.stats.baseline import Baseline, RunValue, change_since
 from imu_square.units import URAD
 
-STATES = ("ok", "warning", "alarm", "invalid", "stale_baseline", "no_baseline")
 # The pooled within-night temperature slope corrects the nights past this many standard
 # errors (a false correction one night in 370).
 DRIFT_SIGNIFICANCE = 3.0
@@ -107,7 +106,7 @@ class Night:
     run : RunRow
         The stored run.
     state : str
-        One of :data:`STATES`.
+        One of :data:`~imu_square.monitor.history.rows.EVALUATION_STATES`.
     change_rad, u_change_rad : float
         Change of the machine's squareness since the baseline and its standard
         uncertainty, baseline's included; NaN when there is none. [rad]
@@ -424,16 +423,12 @@ def _drift_corrections(runs, base_runs):
     for r in valid:
         fit = _within(r)
         if fit and fit.get("regressor") == "time_since_power_on_s" and fit["p_value"] < WARMING_P:
-            out[r.id] = {
-                "regressor": "time_since_power_on_s",
-                "applied": False,
-                "warming": (
-                    f"the sensor was still warming up: theta_y - theta_x drifted "
-                    f"{fit['slope_urad_per_unit'] * 60:+.1f} µm/m a minute during the run "
-                    f"(p = {fit['p_value']:.1g}), {fit['reference']:.0f} s after power-on; "
-                    f"warm it up first, or give it a temperature channel"
-                ),
-            }
+            out[r.id] = _warming_up(
+                f"the sensor was still warming up: theta_y - theta_x drifted "
+                f"{fit['slope_urad_per_unit'] * 60:+.1f} µm/m a minute during the run "
+                f"(p = {fit['p_value']:.1g}), {fit['reference']:.0f} s after power-on; "
+                f"warm it up first, or give it a temperature channel"
+            )
     # Without a temperature channel a drift that is not significant within a short run
     # can still hold hundreds of µm/m against warm baseline nights: a night switched on
     # sooner than any of them, and within the warm-up, is not judged.
@@ -444,18 +439,19 @@ def _drift_corrections(runs, base_runs):
             up = r.time_since_power_on_s
             if r.id in out or up is None or up >= soonest:
                 continue
-            out[r.id] = {
-                "regressor": "time_since_power_on_s",
-                "applied": False,
-                "warming": (
-                    f"the sensor was switched on {up / 60:.1f} min before the run, sooner than "
-                    f"any of the baseline's nights ({min(uptimes) / 60:.0f} min and more) and "
-                    f"within its first {WARM_UP_S / 60:.0f} min after power-on, and without a "
-                    f"temperature channel its warm-up drift cannot be corrected: warm it up "
-                    f"first, or give it a temperature channel"
-                ),
-            }
+            out[r.id] = _warming_up(
+                f"the sensor was switched on {up / 60:.1f} min before the run, sooner than "
+                f"any of the baseline's nights ({min(uptimes) / 60:.0f} min and more) and "
+                f"within its first {WARM_UP_S / 60:.0f} min after power-on, and without a "
+                f"temperature channel its warm-up drift cannot be corrected: warm it up "
+                f"first, or give it a temperature channel"
+            )
     return out
+
+
+def _warming_up(reason):
+    """A night without a temperature channel, not judged while its sensor warms up."""
+    return {"regressor": "time_since_power_on_s", "applied": False, "warming": reason}
 
 
 def _earlier(row, evaluation):

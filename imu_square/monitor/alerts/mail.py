@@ -32,7 +32,6 @@ errors, not retried. When the server takes some recipients and refuses
 others, the alert counts as sent and the refused ones are logged.
 """
 
-import json
 import smtplib
 import socket
 import ssl
@@ -224,11 +223,9 @@ def build_message(alert, sender, to):
     message["Message-ID"] = f"<{alert.alert_id}@imu-square.invalid>"
     message["X-Imu-Square-State"] = alert.state
     message["X-Imu-Square-Machine-Id"] = one_line(alert.machine_id)
-    text = json.dumps(alert.as_dict(), ensure_ascii=False, allow_nan=False, indent=2)
-    message.set_content(f"{alert.verdict}\n\n{text}\n")
-    message.add_attachment(
-        alert.to_json(indent=2), maintype="application", subtype="json", filename="alert.json"
-    )
+    text = alert.to_json(indent=2)
+    message.set_content(f"{alert.verdict}\n\n{text.decode()}\n")
+    message.add_attachment(text, maintype="application", subtype="json", filename="alert.json")
     return message
 
 

@@ -142,30 +142,30 @@ def queue_alert(config, history, record, *, machine_id, state, verdict, now=None
     alert's state stays the squareness's, its verdict and record name the
     diagnostic.
 
-        Call it inside the transaction that stores the night, so that the night
-        and its pending alerts land together; then :func:`deliver_alerts`.
+    Call it inside the transaction that stores the night, so that the night
+    and its pending alerts land together; then :func:`deliver_alerts`.
 
-        Parameters
-        ----------
-        config : AlertsConfig
-            The ``[alerts]`` section.
-        history : History
-            The open history.
-        record : dict
-            The night's record (made JSON-safe by
-            :func:`~imu_square.json_values.json_safe`).
-        machine_id : str
-            The machine's id.
-        state : str
-            One of :data:`~imu_square.monitor.alerts.alert.STATES`.
-        verdict : str
-            The one-line verdict.
-        now : datetime, optional
-            The alert's time (aware); the current time by default.
+    Parameters
+    ----------
+    config : AlertsConfig
+        The ``[alerts]`` section.
+    history : History
+        The open history.
+    record : dict
+        The night's record (made JSON-safe by
+        :func:`~imu_square.json_values.json_safe`).
+    machine_id : str
+        The machine's id.
+    state : str
+        One of :data:`~imu_square.monitor.alerts.alert.STATES`.
+    verdict : str
+        The one-line verdict.
+    now : datetime, optional
+        The alert's time (aware); the current time by default.
 
-        Returns
-        -------
-        Alert
+    Returns
+    -------
+    Alert
     """
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict, now=now)
     with history.transaction():
@@ -265,12 +265,8 @@ def send_without_history(config, record, *, machine_id, state, verdict):
     alert = make_alert(record, machine_id=machine_id, state=state, verdict=verdict)
     outcomes = []
     for sink in (s for s in config.sinks if sink_takes(s, state, record)):
-        if sink.kind == "log":
-            sink.deliver(alert)
-            result = ("sent", 1, None)
-        else:
-            deadline = time.monotonic() + config.retry.max_total_s
-            result = _try(sink, alert, config.retry, deadline, config.retry.attempts)
+        deadline = time.monotonic() + config.retry.max_total_s
+        result = _try(sink, alert, config.retry, deadline, config.retry.attempts)
         outcomes.append(SinkOutcome(sink.name, alert.alert_id, state, *result))
     return AlertReport(alert, tuple(outcomes), ())
 

@@ -71,14 +71,11 @@ def file_sha256(path):
     str
         64 lower-case hexadecimal digits.
     """
-    digest = hashlib.sha256()
     try:
         with open(path, "rb") as f:
-            while chunk := f.read(1 << 20):
-                digest.update(chunk)
+            return hashlib.file_digest(f, "sha256").hexdigest()
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read the recording: {exc.strerror}") from None
-    return digest.hexdigest()
 
 
 def ns_from_datetime(when):
@@ -96,8 +93,7 @@ def ns_from_datetime(when):
     """
     if not isinstance(when, datetime) or when.utcoffset() is None:
         raise HistoryError(f"a time must be a datetime with its time zone, got {when!r}")
-    delta = when - _EPOCH
-    return (delta.days * 86_400 + delta.seconds) * 1_000_000_000 + delta.microseconds * 1000
+    return (when - _EPOCH) // timedelta(microseconds=1) * 1000
 
 
 def datetime_from_ns(ns):

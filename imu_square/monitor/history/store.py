@@ -8,9 +8,9 @@
 (psycopg 3, extra ``imu-square[postgres]``), checks the history, creates or
 migrates its schema (:mod:`imu_square.monitor.history.schema`) and returns a
 :class:`History`. Its methods take and return the frozen rows of
-:mod:`imu_square.monitor.history.rows` (imported here too, with the keys of a run:
-:func:`file_sha256` of the recording and :func:`settings_hash` of the
-analysis settings).
+:mod:`imu_square.monitor.history.rows`, keyed by
+:func:`~imu_square.monitor.history.encoding.file_sha256` of the recording and
+:func:`~imu_square.monitor.history.encoding.settings_hash` of the analysis settings.
 
 Every write method is one transaction of its own, unless it runs inside
 ``with history.transaction():``, which makes many writes (a replay's batch)
@@ -37,44 +37,10 @@ from imu_square.errors import HistoryError
 from imu_square.log import logger
 from imu_square.monitor.history import schema
 from imu_square.monitor.history.diagnostic_fits import DIAGNOSTIC_FITS, DIAGNOSTICS, DiagnosticFits
-from imu_square.monitor.history.encoding import (
-    canonical_json,
-    datetime_from_ns,
-    file_sha256,
-    now_ns,
-    ns_from_datetime,
-    settings_hash,
-)
+from imu_square.monitor.history.encoding import canonical_json, now_ns, ns_from_datetime
 from imu_square.monitor.history.outbox import OUTBOX, Outbox
-from imu_square.monitor.history.rows import (
-    EVALUATION_STATES,
-    AnchorRow,
-    BaselineRow,
-    DiagnosticFitRow,
-    DiagnosticRow,
-    EvaluationRow,
-    OutboxRow,
-    RunRow,
-)
+from imu_square.monitor.history.rows import AnchorRow, BaselineRow, EvaluationRow, RunRow
 from imu_square.monitor.history.sql import Params, Table
-
-__all__ = [
-    "EVALUATION_STATES",
-    "AnchorRow",
-    "BaselineRow",
-    "DiagnosticFitRow",
-    "DiagnosticRow",
-    "EvaluationRow",
-    "History",
-    "OutboxRow",
-    "RunRow",
-    "datetime_from_ns",
-    "default_history_path",
-    "file_sha256",
-    "ns_from_datetime",
-    "open_history",
-    "settings_hash",
-]
 
 #: Seconds a writer waits for another process's transaction by default.
 BUSY_TIMEOUT_S = 60.0
@@ -327,9 +293,9 @@ class History(Outbox, DiagnosticFits):
         machine_id : str
             The machine.
         recording_sha256 : str
-            :func:`file_sha256` of the recording.
+            :func:`~imu_square.monitor.history.encoding.file_sha256` of the recording.
         settings_hash : str
-            :func:`settings_hash` of the settings.
+            :func:`~imu_square.monitor.history.encoding.settings_hash` of the settings.
 
         Returns
         -------

@@ -52,30 +52,26 @@ from imu_square.validation import TomlTable
 METRICS_FIELDS = ("textfile",)
 PREFIX = "imu_square_"
 
-# name, type, help, snapshot attribute
+# name, help, snapshot attribute: gauges
 _SCALARS = (
     (
         "squareness_change_radians",
-        "gauge",
         "Change of the squareness theta_y - theta_x since the baseline, latest valid run "
         "(1e-6 rad = 1 um/m).",
         "change_rad",
     ),
     (
         "squareness_change_uncertainty_radians",
-        "gauge",
         "Standard uncertainty (k=1) of the squareness change.",
         "u_change_rad",
     ),
     (
         "sensor_rotation_radians",
-        "gauge",
         "Rotation eps_c of the sensor about Z on the table, latest valid run.",
         "eps_c_rad",
     ),
     (
         "sensor_rotation_uncertainty_radians",
-        "gauge",
         "Standard uncertainty (k=1) of the sensor rotation.",
         "u_eps_c_rad",
     ),
@@ -195,10 +191,10 @@ def render_metrics(snapshot):
         lines.append(f"# TYPE {PREFIX}{name} {kind}")
         lines.extend(f"{PREFIX}{name}{{{labels}}} {value}" for labels, value in samples)
 
-    for name, kind, help_text, attr in _SCALARS:
+    for name, help_text, attr in _SCALARS:
         value = getattr(snapshot, attr)
         if _present(value):
-            family(name, kind, help_text, [(machine, _number(value))])
+            family(name, "gauge", help_text, [(machine, _number(value))])
     family(
         "state",
         "gauge",

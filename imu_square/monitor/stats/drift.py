@@ -86,23 +86,6 @@ class DriftFit:
         """Whether the slope differs from zero at :data:`SIGNIFICANCE`."""
         return bool(self.p_value < SIGNIFICANCE)
 
-    def corrected(self, value_rad, x):
-        """A value measured at ``x`` corrected to :attr:`reference`.
-
-        Parameters
-        ----------
-        value_rad : float or ndarray
-            ``theta_y - theta_x`` as measured. [rad]
-        x : float or ndarray
-            The drift variable when it was measured. [degC or s]
-
-        Returns
-        -------
-        float or ndarray
-            ``value - b (x - x_ref)``. [rad]
-        """
-        return value_rad - self.slope_rad_per_unit * (np.asarray(x) - self.reference)
-
     def to_json_dict(self):
         """JSON-ready, angles in µrad, with :attr:`significant`."""
         return json_safe(self, urad=True) | {"significant": self.significant}
@@ -176,36 +159,9 @@ def fit_night_drift(result, recording, reference=None):
     pc = result.per_cycle
     y = np.concatenate([pc["squareness_ccw_rad"], pc["squareness_cw_rad"]])
     x = np.concatenate([x_ccw, x_cw])
-    d = np.concatenate([np.ones(x_ccw.size), -np.ones(x_cw.size)])
-    x_ref = float(np.mean(x)) if reference is None else float(reference)
-    _check_design(x, y.size, 4, regressor)
-    design = np.column_stack([np.ones_like(x), d, x - x_ref])
-    fit = sm.OLS(y, design).fit()
-    plain = sm.OLS(y, design[:, :2]).fit()
-    return _drift_fit(regressor, x_ref, fit, plain, slope=2)
-
-
-def _drift_fit(regressor, x_ref, fit, plain, slope):
-    """A :class:`DriftFit` from the statsmodels fit with the slope and the one without."""
-    return DriftFit(
-        regressor=regressor,
-        slope_rad_per_unit=float(fit.params[slope]),
-        u_slope_rad_per_unit=float(fit.bse[slope]),
-        p_value=float(fit.pvalues[slope]),
-        reference=x_ref,
-        value_at_reference_rad=float(fit.params[0]),
-        u_value_at_reference_rad=float(fit.bse[0]),
-        uncorrected_rad=float(plain.params[0]),
-        u_uncorrected_rad=float(plain.bse[0]),
-        n=int(fit.nobs),
-        dof=int(fit.df_resid),
-    )
-
-
-def _check_design(x, n, least, regressor):
-    if n < least:
+    if y.size < 4:
         raise AnalysisError(
-            f"a drift regression needs at least {least} values, got {n}: too few to fit a slope"
+            f"a drift regression needs at least 4 values, got {y.size}: too few to fit a slope"
         )
     if not np.all(np.isfinite(x)):
         raise AnalysisError(f"the drift variable {regressor} has missing values")
@@ -214,3 +170,21 @@ def _check_design(x, n, least, regressor):
         raise AnalysisError(
             f"the drift variable {regressor} does not vary (all {x[0]:g}): no slope to fit"
         )
+    d = np.concatenate([np.ones(x_ccw.size), -np.ones(x_cw.size)])
+    x_ref = float(np.mean(x)) if reference is None else float(reference)
+    design = np.column_stack([np.ones_like(x), d, x - x_ref])
+    fit = sm.OLS(y, design).fit()
+    plain = sm.OLS(y, design[:, :2]).fit()  # the same fit without the slope
+    return DriftFit(
+        regressor=regressor,
+        slope_rad_per_unit=float(fit.params[2]),
+        u_slope_rad_per_unit=float(fit.bse[2]),
+        p_value=float(fit.pvalues[2]),
+        reference=x_ref,
+        value_at_reference_rad=float(fit.params[0]),
+        u_value_at_reference_rad=float(fit.bse[0]),
+        uncorrected_rad=float(plain.params[0]),
+        u_uncorrected_rad=float(plain.bse[0]),
+        n=int(fit.nobs),
+        dof=int(fit.df_resid),
+    )
