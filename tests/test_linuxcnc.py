@@ -233,6 +233,11 @@ def test_the_demo_s_tonight_through_linuxcnc(linuxcnc_motions, tmp_path, capsys)
     assert abs(tonight["change_urad"]) < 4 * tonight["u_change_urad"]
     assert "from the cache" in captured.err  # one LinuxCNC run serves all the nights
     assert captured.err.count("running the program on LinuxCNC") <= 1
+    # the demo's monitor file names the motion, and its diagnostics fit took it as the
+    # model: tonight's backlash of X is the demo machine's 3 µm worn by 1 µm a week for
+    # six weeks (its u is 0.005 µm)
+    assert 'motion = "linuxcnc"' in (tmp_path / "demo" / "monitor.toml").read_text()
+    assert tonight["diagnostics"]["backlash_x"]["value"] == pytest.approx(9.0, abs=0.05)
 
 
 def test_one_run_per_program_and_configuration(fast_motion):
