@@ -184,6 +184,45 @@ def test_the_monitor_judges_controller_driven_nights(
     assert (code, night["state"]) == (11, "alarm"), night
 
 
+def test_the_nightly_diagnostics_fit_the_motion_the_monitor_file_names(
+    fast_motion, tmp_path, capsys
+):
+    # A night of nothing but LinuxCNC's motion of the fast test (no effect in the machine).
+    # Through our own trajectory the diagnostics fit reads the controller's motion as a
+    # scale of X (-11 ± 3 µm/m) and every u about 1.5 times too large; with the monitor
+    # file's motion = "linuxcnc" its model runs the night's own motion, and every
+    # diagnostic reads zero within its noise.
+    from imu_square.monitor.diagnostics.settings import DiagnosticSettings
+    from imu_square.monitor.history.store import open_history
+
+    (tmp_path / "program.toml").write_text(FAST.to_toml())
+    config = tmp_path / "monitor.toml"
+    named = 'file = "program.toml"\nmotion = "linuxcnc"\n'
+    config.write_text(MONITOR.format(step=10.0).replace('file = "program.toml"\n', named))
+    machine = MachineModel(geometry=Geometry(machine_squareness_rad=ALPHA_UM_PER_M * 1e-6))
+    rec, _ = simulate_run(
+        FAST, machine, SENSOR, seed=12, t0_ns=1_790_000_000 * 10**9, motion=fast_motion
+    )
+    path = tmp_path / "night.mcap"
+    write_mcap(rec, path)
+    argv = ["nightly", "--config", str(config), "--recording", str(path), "--json"]
+    seen = {}
+    for model, flags in (("trajectory", ["--motion", "trajectory"]), ("linuxcnc", [])):
+        assert main([*argv, *flags]) == 14  # no baseline yet
+        seen[model] = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["diagnostics"]
+    ours, lcnc = seen["trajectory"]["scale_x"], seen["linuxcnc"]["scale_x"]
+    assert ours["value"] < -2 * ours["u_value"]
+    assert ours["u_value"] > 1.3 * lcnc["u_value"]
+    for name, d in seen["linuxcnc"].items():
+        if d["value"] is not None:
+            assert abs(d["value"]) < 3 * d["u_value"], (name, d)
+    # each model's fit kept under its own key: neither is charted against the other's
+    with open_history(tmp_path / "history.db") as h:
+        (run,) = h.runs("lcnc")
+        for motion in ("trajectory", "linuxcnc"):
+            assert run.id in h.diagnostic_fits("lcnc", DiagnosticSettings(motion=motion).key())
+
+
 def test_the_demo_s_tonight_through_linuxcnc(linuxcnc_motions, tmp_path, capsys):
     code = main(["nightly", "--demo", str(tmp_path / "demo"), "--motion", "linuxcnc", "--json"])
     captured = capsys.readouterr()
@@ -194,6 +233,11 @@ def test_the_demo_s_tonight_through_linuxcnc(linuxcnc_motions, tmp_path, capsys)
     assert abs(tonight["change_urad"]) < 4 * tonight["u_change_urad"]
     assert "from the cache" in captured.err  # one LinuxCNC run serves all the nights
     assert captured.err.count("running the program on LinuxCNC") <= 1
+    # the demo's monitor file names the motion, and its diagnostics fit took it as the
+    # model: tonight's backlash of X is the demo machine's 3 µm worn by 1 µm a week for
+    # six weeks (its u is 0.005 µm)
+    assert 'motion = "linuxcnc"' in (tmp_path / "demo" / "monitor.toml").read_text()
+    assert tonight["diagnostics"]["backlash_x"]["value"] == pytest.approx(9.0, abs=0.05)
 
 
 def test_one_run_per_program_and_configuration(fast_motion):

@@ -23,6 +23,7 @@ def test_minimal_file_takes_the_defaults(tmp_path):
     assert c.program is None and c.history == "" and c.metrics is None
     assert c.analysis.options().cutoff_hz is None  # follows the program, as analyze
     assert c.alarms.step_rad == pytest.approx(10e-6)
+    assert c.motion == "trajectory" and "motion" not in c.diagnostics.stored()
 
 
 def test_relative_paths_are_taken_from_the_file(tmp_path):
@@ -34,6 +35,10 @@ def test_relative_paths_are_taken_from_the_file(tmp_path):
     assert c.history == str(tmp_path / "h" / "hist.db")
     assert c.data_dir == tmp_path / "out" and c.program == tmp_path / "p.toml"
     assert c.emulated.machine == Path("~/m.toml").expanduser()
+    lcnc = read_monitor(
+        _write(tmp_path, text.replace('"p.toml"\n', '"p.toml"\nmotion = "linuxcnc"\n'))
+    )
+    assert lcnc.motion == "linuxcnc" and lcnc.diagnostics.stored()["motion"] == "linuxcnc"
     url = MINIMAL.replace('"m1"\n', '"m1"\nhistory = "postgresql://u@db/hist"\n')
     assert read_monitor(_write(tmp_path, url)).history == "postgresql://u@db/hist"
 
@@ -47,6 +52,7 @@ def test_relative_paths_are_taken_from_the_file(tmp_path):
         (MINIMAL + "[sensor]\nbaud = 0\n", r"\[sensor\] baud must be a whole number in \[1, "),
         (MINIMAL + '[sensor]\ntrigger = "now"\n', r"trigger must be one of \('marker', "),
         (MINIMAL + "[sensor]\nport = 3\n", r"port must be a non-empty string"),
+        (MINIMAL + '[program]\nmotion = "fanuc"\n', r"\[program\] motion must be one of \('traj"),
         (MINIMAL + "[alarms]\nfalse_alarm_nights = 2\n", r"false_alarm_nights must be in \[10"),
         (MINIMAL + "[alarms]\nstep_um_per_m = 0\n", r"step_um_per_m must be in \(0, 10000\]"),
         (MINIMAL + "[analysis]\ncutoff = 4\n", r"\[analysis\] has unknown field 'cutoff'"),

@@ -158,6 +158,92 @@ def test_history_its_charts_and_the_report_show_each_diagnostic(grown, capsys):
     assert set(record["diagnostics"]) == {d.name for d in diagnostics_of(DEFAULT_EFFECTS)}
 
 
+@pytest.mark.slow
+def test_the_diagnostics_chart_keeps_an_earlier_baselines_limits_and_alarm(grown, tmp_path, capsys):
+    # After the backlash's alarm a new baseline is set from nights at 6 µm. The chart
+    # draws each baseline's period against its own: both periods' limits at their own
+    # baseline's numbers, and the alarm that fired in the first period.
+    import shutil
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import numpy as np
+    from matplotlib import pyplot as plt
+
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.history.encoding import datetime_from_ns
+    from imu_square.monitor.night import judge_history
+    from imu_square.monitor.report.diagnostics_figure import plot_diagnostics
+    from imu_square.monitor.stats.alarms import AlarmDesign
+
+    old, records, _ = grown
+    folder = tmp_path / "m1"
+    shutil.copytree(old, folder)
+    config = folder / "monitor.toml"
+    fired = next(r for _, _, r in records if r["diagnostic_alarms"])
+    repaired = [str(backlash_night(folder, d, 6.0)) for d in (20, 21, 22)]
+    assert main(["baseline", "set", "--config", str(config), *repaired]) == 0
+    assert judge(config, backlash_night(folder, 23, 6.0), capsys)[1]["diagnostic_alarms"] == []
+    with open_history(folder / "history.db") as h:
+        assessment = judge_history(read_monitor(config), h)
+        rows = h.baselines("m1")
+        fits = h.diagnostic_fits("m1", DiagnosticSettings().key())
+    assert len(rows) == 2 and len(assessment.earlier) == 1
+    # each limit from its stored baseline: its nights' backlash_x, its stored design's L
+    expected = []
+    for row, truth_um in zip(rows, (BACKLASH_UM, 6.0), strict=True):
+        v = np.array([fits[i].value("backlash_x").value for i in row.run_ids])
+        u = np.array([fits[i].value("backlash_x").u_value for i in row.run_ids])
+        assert np.mean(v) * 1e6 == pytest.approx(truth_um, abs=0.1)
+        between = np.sqrt(max(0.0, np.var(v, ddof=1) - np.mean(u**2)))
+        limit = AlarmDesign.from_json_dict(
+            row.diagnostic_designs["backlash_x"]["design"]
+        ).shewhart.limit
+        expected.append((row, np.mean(v), between, limit))
+    drawn = {}
+
+    def savefig(fig, *args, **kwargs):
+        (ax,) = [a for a in fig.axes if a.get_title(loc="left") == "backlash"]
+        drawn["limits"] = [line for line in ax.lines if line.get_linestyle() == "--"]
+        drawn["alarms"] = [line for line in ax.lines if line.get_marker() == "s"]
+        drawn["starts"] = [line for line in ax.lines if line.get_linestyle() == ":"]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plt.Figure, "savefig", savefig)
+        plot_diagnostics(assessment, folder / "diagnostics.png")
+    assert len(drawn["starts"]) == 2  # where each baseline's runs begin
+    second_start = datetime_from_ns(rows[1].first_run_at_ns)
+
+    def _when(night):
+        return datetime_from_ns(night.run.recorded_at_ns)
+
+    by_period = {}
+    for line in drawn["limits"]:  # upper and lower, each period
+        by_period.setdefault(line.get_xdata()[0], []).append(line)
+    assert sorted(map(len, by_period.values())) == [2, 2]
+    uppers = [
+        max(pair, key=lambda line: np.mean(line.get_ydata()))
+        for _, pair in sorted(by_period.items())
+    ]
+    by_time = {
+        _when(n): fits[n.run.id].value("backlash_x") for n in assessment.nights if n.run.id in fits
+    }
+    for line, (row, value, between, limit) in zip(uppers, expected, strict=True):
+        dates = line.get_xdata()
+        assert all((d < second_start) == (row is rows[0]) for d in dates)
+        want = [(value + limit * np.hypot(by_time[d].u_value, between)) * 1e6 for d in dates]
+        np.testing.assert_allclose(line.get_ydata(), want, rtol=1e-9)
+    # the periods' limits differ by their baselines' backlash, about 4 µm
+    gap = np.mean(uppers[1].get_ydata()) - np.mean(uppers[0].get_ydata())
+    assert gap == pytest.approx((expected[1][1] - expected[0][1]) * 1e6, abs=0.3)
+    # the alarm fired in the first period and stood to its end: its marker is there
+    (alarm,) = drawn["alarms"]
+    assert all(d < second_start for d in alarm.get_xdata())
+    assert alarm.get_xdata()[0] == _when(assessment.night_of(fired["run_id"]))
+    assert alarm.get_ydata()[0] == pytest.approx(fired["diagnostics"]["backlash_x"]["value"])
+
+
 def test_a_failing_diagnostic_fit_keeps_the_night_and_notes_the_failure(
     tmp_path, monkeypatch, capsys, caplog
 ):

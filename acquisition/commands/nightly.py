@@ -54,9 +54,10 @@ def register(sub):
     p.add_argument(
         "--motion",
         choices=MOTION_SOURCES,
-        default="trajectory",
-        help="emulated board: the commanded motion, our own trajectory (default) or LinuxCNC's "
-        "planner running the program in real time (or its cached run); with --demo, tonight's",
+        help="the commanded motion, our own trajectory or LinuxCNC's planner running the "
+        "program in real time (or its cached run): the emulated board runs it, and with "
+        "--config or --demo the night's diagnostics fit takes it as its model (default: the "
+        "monitor file's [program] motion, else trajectory)",
     )
     p.add_argument(
         "--trigger",
@@ -196,7 +197,7 @@ def run(args):
 
 def run_single(args):
     """Record, analyse, write the result and the plot; compare with the truth when emulated."""
-    from imu_square.errors import AnalysisError
+    from imu_square.errors import AnalysisError, ImuSquareError
     from imu_square.io.mcap import read_mcap
     from imu_square.pipeline.run_figure import plot_results
     from imu_square.pipeline.squareness import analyze
@@ -205,7 +206,12 @@ def run_single(args):
     from imu_square.units import SQUARENESS_UNIT, URAD
 
     program = read_program(args.program or data_path("program_paper.toml"))
-    motion = _motion(args, program, emulated=args.port is None)
+    if args.motion not in (None, "trajectory") and args.port is not None:
+        raise ImuSquareError(
+            f"--motion {args.motion} drives the emulated board: it cannot go with a real board "
+            "(--port) but with a monitor file, whose nightly diagnostics it models"
+        )
+    motion = _motion(args.motion or "trajectory", program)
     out = Path(args.out or "imu-square-out")
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f"nightly-{time.strftime('%Y%m%d-%H%M%S')}"
@@ -287,14 +293,17 @@ def run_monitor(args, config=None):
             f"sensor is and which program runs"
         )
     config = config or read_monitor(args.config)
+    if args.motion:
+        config = config.with_motion(args.motion)
     program = config.test_program()
     out = Path(args.out) if args.out else config.output_dir()
     # Before the machine runs or anything is stored; a check makes nothing.
     _check_night(config, out, not args.recording, make=not args.check)
     if args.recording and not Path(args.recording).is_file():
         raise ImuSquareError(f"{args.recording}: no such recording")
-    emulated = config.sensor.emulated and not args.recording
-    motion = None if args.check else _motion(args, program, emulated)
+    # a real board's or a recording's motion is the diagnostics fit's alone
+    emulated = config.sensor.emulated and not args.recording and not args.check
+    motion = _motion(config.motion, program) if emulated else None
     if args.check and _not_made_yet(config.history_location()):
         print(
             f"{config.path}: machine {config.machine_id}, history "
@@ -407,17 +416,11 @@ def _not_made_yet(location):
     return True
 
 
-def _motion(args, program, emulated):
+def _motion(source, program):
     """The emulated machine's commanded motion (None: our own trajectory)."""
-    from imu_square.errors import ImuSquareError
     from imu_square.simulate.sources import commanded_motion
 
-    if args.motion != "trajectory" and not emulated:
-        raise ImuSquareError(
-            f"--motion {args.motion} drives the emulated board: it cannot go with a real "
-            "board (--port, or a monitor file's sensor port) or a --recording"
-        )
-    return commanded_motion(program, args.motion, lambda text: print(text, file=sys.stderr))
+    return commanded_motion(program, source, lambda text: print(text, file=sys.stderr))
 
 
 def _check_night(config, out, recording, make=True):
@@ -453,12 +456,11 @@ def _check_night(config, out, recording, make=True):
 def run_demo(args):
     """Seed a demonstration machine's history from the simulator, then run its night."""
     from imu_square.errors import ImuSquareError
-    from imu_square.monitor.config import read_monitor
-    from imu_square.monitor.demo import prepare_demo, write_demo_files
+    from imu_square.monitor.demo import prepare_demo
 
     if args.config or args.recording:
         raise ImuSquareError("--demo makes its own monitor file and recording")
-    folder = Path(args.demo)
-    motion = _motion(args, read_monitor(write_demo_files(folder)).test_program(), True)
-    config = prepare_demo(folder, progress=lambda text: print(text, file=sys.stderr), motion=motion)
+    config = prepare_demo(
+        Path(args.demo), progress=lambda text: print(text, file=sys.stderr), motion=args.motion
+    )
     return run_monitor(args, config)

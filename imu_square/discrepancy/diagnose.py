@@ -177,7 +177,7 @@ def _unclipped(problem, state):
 
 
 @one_blas_thread()  # small least-squares problems (imu_square.blas)
-def fit_effects(recording, program, effects, shapes=None, analysis=None, max_steps=8):
+def fit_effects(recording, program, effects, shapes=None, analysis=None, max_steps=8, motion=None):
     """Fit a fixed set of effects to a recording (module docstring).
 
     Parameters
@@ -195,6 +195,9 @@ def fit_effects(recording, program, effects, shapes=None, analysis=None, max_ste
         The pipeline's options (no bootstrap by default).
     max_steps : int
         Most Gauss-Newton steps (at least one clipped after the unclipped ones).
+    motion : SampledMotion, optional
+        The commanded motion the model takes (a controller's); our own
+        trajectory when None.
 
     Returns
     -------
@@ -210,7 +213,7 @@ def fit_effects(recording, program, effects, shapes=None, analysis=None, max_ste
     effects = tuple(dict.fromkeys(effects))
     sizes, held = _held_shapes(effects, shapes or {})
     t0 = time.perf_counter()
-    problem, base, base_params = fit_base(recording, program, analysis)
+    problem, base, base_params = fit_base(recording, program, analysis, motion=motion)
     t1 = time.perf_counter()
     start = base.state
     for p, value in held.items():

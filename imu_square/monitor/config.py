@@ -25,6 +25,9 @@ file, as ``imu-square init`` writes it::
 
     [program]
     file = ""                    # the circle test's program file; "" = the paper's test
+    motion = "trajectory"        # its commanded motion: "trajectory" (our own) or "linuxcnc"
+                                 # (LinuxCNC's planner): the emulated board runs it, and the
+                                 # nightly diagnostics fit takes it as its model
 
     [analysis]
     # cutoff_hz = 4.0            # unset: 8 pi x the program's circle frequency, as analyze
@@ -44,13 +47,14 @@ The history's per-user default is :func:`imu_square.monitor.history.store.defaul
 """
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from imu_square.errors import MonitorConfigError
 from imu_square.monitor.alerts.config import AlertsConfig, alerts_from_mapping
 from imu_square.monitor.diagnostics.settings import DiagnosticSettings, diagnostics_from_mapping
 from imu_square.monitor.report.metrics import MetricsConfig, metrics_from_mapping
+from imu_square.simulate.sources import MOTION_SOURCES
 from imu_square.textfile import read_toml
 from imu_square.units import URAD
 from imu_square.validation import TomlTable, check_sections
@@ -254,6 +258,26 @@ class MonitorConfig:
     alerts: AlertsConfig = field(default_factory=AlertsConfig)
     metrics: MetricsConfig | None = None
 
+    @property
+    def motion(self):
+        """The program's commanded motion (:data:`~imu_square.simulate.sources.MOTION_SOURCES`),
+        kept with the diagnostics, whose fit takes it as its model."""
+        return self.diagnostics.motion
+
+    def with_motion(self, source):
+        """This monitor file with another commanded motion (``nightly --motion``).
+
+        Parameters
+        ----------
+        source : str
+            One of :data:`~imu_square.simulate.sources.MOTION_SOURCES`.
+
+        Returns
+        -------
+        MonitorConfig
+        """
+        return replace(self, diagnostics=replace(self.diagnostics, motion=source))
+
     def test_program(self):
         """The program the monitor expects: read from :attr:`program`, else the paper's test.
 
@@ -366,8 +390,9 @@ def monitor_from_mapping(doc, path):
         speed=emu.number("speed", 0.0, 1000.0, lo_open=True, default=20.0),
         uptime_s=emu.number("uptime_s", 0.0, 1e9, default=18000.0),
     )
-    prog = table("program", ("file",))
+    prog = table("program", ("file", "motion"))
     program = prog.path("file") if prog.text("file", default="", empty=True) else None
+    motion = prog.choice("motion", MOTION_SOURCES, default="trajectory")
     analysis = AnalysisSettings.from_table(table("analysis", ("cutoff_hz", "order", "bootstrap")))
     alarm = table("alarms", ("false_alarm_nights", "step_um_per_m", "monte_carlo_nights"))
     alarms = AlarmSettings(
@@ -391,7 +416,9 @@ def monitor_from_mapping(doc, path):
         program=program,
         analysis=analysis,
         alarms=alarms,
-        diagnostics=diagnostics_from_mapping(doc.get("diagnostics"), source),
+        diagnostics=replace(
+            diagnostics_from_mapping(doc.get("diagnostics"), source), motion=motion
+        ),
         alerts=alerts_from_mapping(doc.get("alerts"), source, base),
         metrics=metrics,
     )

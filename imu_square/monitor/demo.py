@@ -103,6 +103,7 @@ speed = 20.0
 
 [program]
 file = "program.toml"
+motion = "{motion}"
 
 [alarms]
 false_alarm_nights = 730
@@ -141,13 +142,16 @@ def _alpha(night):
     return REPAIRED_UM_PER_M
 
 
-def write_demo_files(folder):
+def write_demo_files(folder, motion="trajectory"):
     """Write the demo's monitor, program, machine and sensor files (kept if present).
 
     Parameters
     ----------
     folder : Path
         The demo's folder.
+    motion : str
+        The program's commanded motion the monitor file names
+        (:data:`~imu_square.simulate.sources.MOTION_SOURCES`).
 
     Returns
     -------
@@ -156,7 +160,7 @@ def write_demo_files(folder):
     """
     folder.mkdir(parents=True, exist_ok=True)
     files = {
-        "monitor.toml": _MONITOR.format(machine_id=MACHINE_ID),
+        "monitor.toml": _MONITOR.format(machine_id=MACHINE_ID, motion=motion),
         "program.toml": _PROGRAM,
         "sensor.toml": _SENSOR,
         "machine.toml": _machine_text(REPAIRED_UM_PER_M, NIGHTS),
@@ -167,8 +171,11 @@ def write_demo_files(folder):
     return folder / "monitor.toml"
 
 
-def seed_history(config, history, now=None, progress=None, motion=None):
+def seed_history(config, history, now=None, progress=None):
     """Simulate and judge the demo machine's past nights into its history.
+
+    Every night runs the monitor file's commanded motion (``[program] motion``),
+    which its diagnostics fit takes as its model too.
 
     Parameters
     ----------
@@ -180,9 +187,6 @@ def seed_history(config, history, now=None, progress=None, motion=None):
         Tonight (UTC); the past nights end yesterday at 02:30.
     progress : callable, optional
         Called with a line of text now and then.
-    motion : SampledMotion, optional
-        The commanded motion of every night (a controller's); None for our own
-        trajectory.
     """
     from imu_square.io.mcap import write_mcap
     from imu_square.monitor.baseline_setup import set_baseline
@@ -190,9 +194,11 @@ def seed_history(config, history, now=None, progress=None, motion=None):
     from imu_square.monitor.replay import ReplayJob, run_local
     from imu_square.simulate import read_sensor, simulate_run
     from imu_square.simulate.machine import machine_from_mapping
+    from imu_square.simulate.sources import commanded_motion
 
     say = progress or (lambda text: None)
     program = config.test_program()
+    motion = commanded_motion(program, config.motion, say)
     sensor = read_sensor(config.emulated.sensor)
     folder = config.output_dir() / "seed"
     folder.mkdir(parents=True, exist_ok=True)
@@ -264,11 +270,13 @@ def prepare_demo(folder, progress=None, now=None, motion=None):
         Called with a line of text now and then.
     now : datetime, optional
         Tonight (UTC).
-    motion : SampledMotion, optional
-        The commanded motion the past nights ran, tonight's too: a shop's history
-        comes from one controller, and the sensor's ``eps_c`` reads differently on
-        another one's ramps (by 0.05 deg on LinuxCNC's), which the monitor takes
-        for a remounted sensor.
+    motion : str, optional
+        The commanded motion (:data:`~imu_square.simulate.sources.MOTION_SOURCES`)
+        the past nights ran, tonight's too, and the diagnostics' model; None for
+        the monitor file's (our own trajectory in a new one). A shop's history
+        comes from one controller, and the sensor's ``eps_c`` reads differently
+        on another one's ramps (by 0.05 deg on LinuxCNC's), which the monitor
+        takes for a remounted sensor.
 
     Returns
     -------
@@ -276,9 +284,11 @@ def prepare_demo(folder, progress=None, now=None, motion=None):
     """
 
     folder = Path(folder)
-    config = read_monitor(write_demo_files(folder))
+    config = read_monitor(write_demo_files(folder, motion or "trajectory"))
+    if motion is not None:
+        config = config.with_motion(motion)
     with config.open_history() as history:
         if not history.runs(config.machine_id):
             shutil.rmtree(config.output_dir() / "seed", ignore_errors=True)
-            seed_history(config, history, now=now, progress=progress, motion=motion)
+            seed_history(config, history, now=now, progress=progress)
     return config

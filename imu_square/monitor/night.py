@@ -384,7 +384,8 @@ def judge_history(config, history):
 
 
 def _earlier_periods(config, history, current):
-    """Each earlier baseline's period judged against it, as it was then (oldest first)."""
+    """Each earlier baseline's period judged against it, as it was then (oldest first), its
+    diagnostics against their baselines of its nights."""
     rows = [b for b in history.baselines(config.machine_id) if current and b.id < current.id]
     if not rows:
         return ()
@@ -397,7 +398,10 @@ def _earlier_periods(config, history, current):
             settings_hash=row.settings_hash,
         )
         design = stored_design(history, row, config.alarms)
-        periods.append(judge_runs(runs, row, design, tuple(history.anchors(row.id))))
+        period = judge_runs(runs, row, design, tuple(history.anchors(row.id)))
+        judged = [n.run for n in period.nights if n.state != "invalid"]
+        trends = judge_diagnostics(history, judged, row, config.diagnostics, config.alarms)
+        periods.append(replace(period, diagnostics=trends))
     return tuple(periods)
 
 

@@ -59,6 +59,10 @@ uptime_s = 18000.0
 [program]
 # The circle test the machine runs (imu-square program writes its NC code); "" = the paper's test.
 file = {program_toml}
+# Its commanded motion: "trajectory" (our own model of a controller) or "linuxcnc" (LinuxCNC's
+# planner run on this computer, Debian's linuxcnc-uspace): the nightly diagnostics fit takes
+# it as its model, and the emulated board runs it.
+motion = "trajectory"
 
 [analysis]
 # The analysis of every night; a baseline is of one set of settings. Unset, the low-pass

@@ -30,7 +30,8 @@ def diagnose_recording(settings, recording, program, analysis):
     recording : Recording
         The night's recording, which the analysis accepted.
     program : TestProgram or None
-        The program it ran (the recording's own when None).
+        The program it ran (the recording's own when None); its commanded
+        motion is the settings' ``motion``.
     analysis : AnalysisSettings
         The monitor's analysis settings (the segmentation's filter).
 
@@ -41,18 +42,21 @@ def diagnose_recording(settings, recording, program, analysis):
     """
     from imu_square.discrepancy.diagnose import fit_effects
     from imu_square.errors import AnalysisError, step
+    from imu_square.simulate.sources import commanded_motion
 
     if not settings.enabled:
         return None
     start = time.perf_counter()
     try:
+        program = program or recording.program
         with step("the diagnostic fit", AnalysisError):
             fit = fit_effects(
                 recording,
-                program or recording.program,
+                program,
                 settings.effects,
                 settings.held_shapes(),
                 analysis=replace(analysis.options(), bootstrap_n=0),
+                motion=commanded_motion(program, settings.motion, logger.info),
             )
     except Exception as exc:  # no failure of the fit may lose the night
         logger.debug("the diagnostic fit failed", exc_info=True)

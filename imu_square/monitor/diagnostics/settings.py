@@ -18,6 +18,10 @@ shapes, and the diagnostics that have an alarm of their own.
     [diagnostics.alarms]            # off by default: a diagnostic's name and unit, and
     backlash_x_um = 3.0             # the change its charts should find quickly
 
+The fit's model runs the program's commanded motion as the night ran it: the
+monitor file's ``[program] motion`` (our own trajectory, or LinuxCNC's
+planner's, :mod:`imu_square.simulate.sources`).
+
 An alarm is designed like the squareness's (``[alarms]`` false_alarm_nights
 and monte_carlo_nights) on the diagnostic's change against its value over
 the baseline's nights (:mod:`.trend`).
@@ -47,11 +51,17 @@ class DiagnosticSettings:
     alarm_steps : dict of str to float
         Diagnostic name to the change its alarm should find quickly, in SI;
         a diagnostic not named has no alarm.
+    motion : str
+        The commanded motion the fit's model runs, one of
+        :data:`~imu_square.simulate.sources.MOTION_SOURCES`: the night's own
+        (a controller's ramps read through our trajectory's look like a
+        servo mismatch and spikes).
     """
 
     effects: tuple = DEFAULT_EFFECTS
     shapes: dict = field(default_factory=dict)
     alarm_steps: dict = field(default_factory=dict)
+    motion: str = "trajectory"
 
     @property
     def enabled(self):
@@ -75,18 +85,22 @@ class DiagnosticSettings:
         return out
 
     def stored(self):
-        """What a night's fit is keyed by in the history (its hash): effects, shapes, software.
+        """What a night's fit is keyed by in the history (its hash): effects, shapes,
+        software, and the motion unless our own trajectory.
 
         Returns
         -------
         dict
             JSON values.
         """
-        return {
+        stored = {
             "effects": list(self.effects),
             "shapes": self.held_shapes(),
             "software": __version__,
         }
+        if self.motion != "trajectory":  # the fits stored before the choice keep their key
+            stored["motion"] = self.motion
+        return stored
 
     def key(self):
         """:func:`~imu_square.monitor.history.encoding.settings_hash` of :meth:`stored`."""

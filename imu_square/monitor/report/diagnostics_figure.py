@@ -1,16 +1,26 @@
 """The diagnostics' trend chart: one panel per effect, every night's value with its uncertainty.
 
 Each panel shows an effect's diagnostics (X and Y together) in their own
-unit: every valid night's value with its standard uncertainty, the
-diagnostic's baseline value with its band (``±u`` of the baseline), the
-alarm limits of a diagnostic that has an alarm (its baseline ``± L u`` of
-each night, ``L`` the Shewhart limit), the nights its charts were past their
-warning or alarm limits, and the nights whose fit gave no value.
+unit: every valid night's value with its standard uncertainty and the nights
+whose fit gave no value. Every baseline's period is drawn against that
+baseline, as the squareness's trend chart draws it (:mod:`.figures`): where
+its runs were and where they begin, the diagnostic's baseline value with its
+band (``±u`` of the baseline), the alarm limits of a diagnostic that has an
+alarm (its baseline ``± L u`` of each night, ``L`` the Shewhart limit), and
+the nights its charts were past their warning or alarm limits; so an alarm
+that fired before the current baseline stays in view.
 """
 
 import math
 
 from imu_square.monitor.history.encoding import datetime_from_ns
+from imu_square.monitor.report.figures import (
+    baseline_runs,
+    in_period,
+    mark_baseline,
+    once,
+    periods,
+)
 
 _COLOURS = ("tab:blue", "tab:green", "tab:purple")
 
@@ -22,7 +32,9 @@ def plot_diagnostics(assessment, path, title=""):
     ----------
     assessment : Assessment
         The machine's history judged, with its diagnostics
-        (:attr:`~imu_square.monitor.verdict.Assessment.diagnostics`).
+        (:attr:`~imu_square.monitor.verdict.Assessment.diagnostics`) and its
+        earlier baselines' periods with theirs
+        (:attr:`~imu_square.monitor.verdict.Assessment.earlier`).
     path : str or Path
         PNG file to write.
     title : str
@@ -36,17 +48,20 @@ def plot_diagnostics(assessment, path, title=""):
 
     by_effect = {}
     for trend in assessment.diagnostics:
-        by_effect.setdefault(trend.diagnostic.effect, []).append(trend)
+        by_effect.setdefault(trend.diagnostic.effect, []).append(trend.diagnostic)
     n = max(len(by_effect), 1)
     fig, axes = plt.subplots(
         n, 1, figsize=(11, 1.0 + 2.3 * n), sharex=True, squeeze=False, constrained_layout=True
     )
     axes = axes[:, 0]
-    for ax, (effect, trends) in zip(axes, by_effect.items(), strict=False):
-        for trend, colour in zip(trends, _COLOURS, strict=False):
-            _draw(ax, trend, colour)
+    labelled = set()
+    for ax, (effect, diagnostics) in zip(axes, by_effect.items(), strict=False):
+        for period in periods(assessment):
+            mark_baseline((ax,), period.baseline_row, labelled)
+        for d, colour in zip(diagnostics, _COLOURS, strict=False):
+            _draw(ax, _period_trends(assessment, d.name), colour, labelled)
         ax.set_title(effect.replace("_", " "), fontsize=9, loc="left")
-        ax.set_ylabel(f"[{trends[0].diagnostic.unit}]")
+        ax.set_ylabel(f"[{diagnostics[0].unit}]")
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7, ncol=4, loc="upper left")
@@ -58,14 +73,27 @@ def plot_diagnostics(assessment, path, title=""):
     plt.close(fig)
 
 
+def _period_trends(assessment, name):
+    """A diagnostic's trend in every baseline's period: ``(period, trend)``, oldest first."""
+    return [
+        (period, trend)
+        for period in periods(assessment)
+        for trend in period.diagnostics
+        if trend.diagnostic.name == name
+    ]
+
+
 def _when(night):
     return datetime_from_ns(night.run.recorded_at_ns)
 
 
-def _draw(ax, trend, colour):
-    """One diagnostic: its nights, its baseline band, its limits and its alarm nights."""
-    d = trend.diagnostic
-    nights = [n for n in trend.nights if n.run.recorded_at_ns is not None]
+def _draw(ax, period_trends, colour, labelled):
+    """One diagnostic: its nights, then each period's band, limits and alarm nights."""
+    d = period_trends[-1][1].diagnostic
+    by_run = {}  # each night once, from the latest period that has it
+    for _, trend in period_trends:
+        by_run.update({n.run.id: n for n in trend.nights if n.run.recorded_at_ns is not None})
+    nights = sorted(by_run.values(), key=lambda n: n.run.recorded_at_ns)
     valued = [n for n in nights if math.isfinite(n.value)]
     if valued:
         ax.errorbar(
@@ -77,11 +105,23 @@ def _draw(ax, trend, colour):
             capsize=2,
             lw=0.8,
             color=colour,
-            label=d.name,
+            label=once(labelled, d.name),
         )
-    base = trend.baseline
-    if base is not None and valued:
-        span = [_when(valued[0]), _when(valued[-1])]
+    for period, trend in period_trends:
+        _draw_period(ax, period, trend, colour, labelled)
+    missing = [n for n in nights if not math.isfinite(n.value)]
+    if missing:
+        low = ax.get_ylim()[0]
+        ax.plot([_when(n) for n in missing], [low] * len(missing), "x", color="grey")
+
+
+def _draw_period(ax, period, trend, colour, labelled):
+    """A diagnostic in one baseline's period: its baseline band, its limits, its alarm nights."""
+    d, base = trend.diagnostic, trend.baseline
+    valued = [n for n in in_period(period, trend.nights) if math.isfinite(n.value)]
+    runs = baseline_runs(period.baseline_row)
+    if base is not None and runs is not None:
+        span = [runs[0], max([runs[1], *map(_when, valued)])]
         v, u = base.value / d.scale, base.u_value / d.scale
         ax.hlines(v, *span, colors=colour, lw=0.8, ls=":")
         ax.fill_between(span, v - u, v + u, color=colour, alpha=0.15)
@@ -99,7 +139,7 @@ def _draw(ax, trend, colour):
                 color=colour,
                 lw=0.7,
                 ls="--",
-                label=f"{d.name} alarm limit" if sign == 1 else None,
+                label=once(labelled, f"{d.name} alarm limit") if sign == 1 else None,
             )
     for state, marker, face in (("warning", "D", "tab:orange"), ("alarm", "s", "tab:red")):
         sel = [n for n in charted if n.state == state]
@@ -111,9 +151,5 @@ def _draw(ax, trend, colour):
                 mfc="none",
                 mec=face,
                 ms=8,
-                label=f"{d.name} {state}",
+                label=once(labelled, f"{d.name} {state}"),
             )
-    missing = [n for n in nights if not math.isfinite(n.value)]
-    if missing:
-        low = ax.get_ylim()[0]
-        ax.plot([_when(n) for n in missing], [low] * len(missing), "x", color="grey")

@@ -61,7 +61,7 @@ def plot_trend(assessment, path, title=""):
     )
     top.axhline(0.0, color="black", lw=0.8)
     labelled = set()
-    for period in (*assessment.earlier, assessment):
+    for period in periods(assessment):
         _draw_period(top, bottom, period, labelled)
     nights = [n for n in assessment.nights if n.run.recorded_at_ns is not None]
     invalid = [n for n in nights if n.state == "invalid"]
@@ -88,30 +88,93 @@ def plot_trend(assessment, path, title=""):
     plt.close(fig)
 
 
+def periods(assessment):
+    """Every baseline's period of an assessment, oldest first, the current one last.
+
+    Parameters
+    ----------
+    assessment : Assessment
+        The machine's history judged (:attr:`Assessment.earlier` its earlier periods).
+
+    Returns
+    -------
+    tuple of Assessment
+        Each judged against its own baseline.
+    """
+    return (*assessment.earlier, assessment)
+
+
+def in_period(period, nights):
+    """The nights of a baseline's period: recorded, and not before its baseline's first run."""
+    base = period.baseline_row
+    start = base.first_run_at_ns if base is not None else None
+    return [
+        n
+        for n in nights
+        if n.run.recorded_at_ns is not None and (start is None or n.run.recorded_at_ns >= start)
+    ]
+
+
+def baseline_runs(base):
+    """When a baseline's runs were: its first and last as datetimes, or None.
+
+    Parameters
+    ----------
+    base : BaselineRow or None
+        The baseline.
+
+    Returns
+    -------
+    tuple of datetime or None
+        None without a baseline or its runs' times.
+    """
+    if base is None or not (base.first_run_at_ns and base.last_run_at_ns):
+        return None
+    return datetime_from_ns(base.first_run_at_ns), datetime_from_ns(base.last_run_at_ns)
+
+
+def mark_baseline(axes, base, labelled):
+    """Shade a baseline's runs and mark where they begin, on each of the axes.
+
+    Parameters
+    ----------
+    axes : sequence of Axes
+        Where to mark it.
+    base : BaselineRow or None
+        The baseline (nothing is marked without its runs' times).
+    labelled : set of str
+        The legend entries given already (:func:`once`).
+    """
+    runs = baseline_runs(base)
+    if runs is None:
+        return
+    for ax in axes:
+        ax.axvspan(*runs, color="tab:green", alpha=0.12, label=once(labelled, "baseline runs"))
+        ax.axvline(runs[0], color="tab:green", ls=":", lw=1.0, label=once(labelled, "baseline set"))
+
+
+def once(labelled, name):
+    """A legend entry's label the first time, None after: each entry once, however many
+    periods draw it."""
+    if name in labelled:
+        return None
+    labelled.add(name)
+    return name
+
+
 def _draw_period(top, bottom, assessment, labelled):
     """One baseline's period: its band, its nights, its limits and its chart statistics."""
 
     def label(name):
-        # Each legend entry once, however many periods draw it.
-        if name in labelled:
-            return None
-        labelled.add(name)
-        return name
+        return once(labelled, name)
 
     base, design = assessment.baseline_row, assessment.design
-    start = base.first_run_at_ns if base is not None else None
-    nights = [
-        n
-        for n in assessment.nights
-        if n.run.recorded_at_ns is not None and (start is None or n.run.recorded_at_ns >= start)
-    ]
-    if base is not None and base.first_run_at_ns and base.last_run_at_ns:
-        first, last = datetime_from_ns(base.first_run_at_ns), datetime_from_ns(base.last_run_at_ns)
-        for ax in (top, bottom):
-            ax.axvspan(first, last, color="tab:green", alpha=0.12, label=label("baseline runs"))
-            ax.axvline(first, color="tab:green", ls=":", lw=1.0, label=label("baseline set"))
+    nights = in_period(assessment, assessment.nights)
+    mark_baseline((top, bottom), base, labelled)
+    marked = baseline_runs(base)
+    if marked is not None:
         band = base.u_squareness_mean_rad / abs(math.cos(2 * base.eps_c_rad)) / URAD
-        span = [first, max([last, *_dates(nights)])]
+        span = [marked[0], max([marked[1], *_dates(nights)])]
         top.fill_between(
             span, -band, band, color="tab:green", alpha=0.2, label=label("baseline ±u")
         )
