@@ -29,12 +29,12 @@ projecting out the base model fitted to the clean noisy recording. Each case
 is drawn at a ratio log-uniform in [3, 10] of that limit (``lambda`` scales
 with the size squared; the ratio is measured again at the size drawn). For
 effects with no candidate only the views can see them: the limit is the size
-at which the most sensitive view (each band octave on its own) has 50 % power
-to leave a gap (p below ``GAP_LEFT_P``, the headline's rule), with the view's
-noncentrality the sum of squares of its components of the generator's signal
-with the base model's fit taken out, on its degrees of freedom less the
-base model's (:meth:`FeatureSpace.hat_dof`); the acceptance asks the headline
-to say a gap is left.
+at which the most sensitive view (each band octave on its own, at the band
+view's critical ratio) has 50 % power to leave a gap (p below ``GAP_LEFT_P``,
+the headline's rule), with the view's noncentrality the sum of squares of its
+components of the generator's signal with the base model's fit taken out, on
+its degrees of freedom less the base model's (:meth:`FeatureSpace.hat_dof`);
+the acceptance asks the headline to say a gap is left.
 
 Acceptance (issue 22, section 3): named at >= 3x the limit in >= 95 % per
 effect family with a candidate; clean recordings name nothing in >= 95 %;
@@ -199,16 +199,31 @@ def _lambda(problem, q, free_effect, free_clean):
     return float(np.sum((v - q @ (q.T @ v)) ** 2))
 
 
-def _lambda50(level, dof):
-    """Noncentrality at which a chi-square test on ``dof`` at ``level`` has 50 % power."""
-    crit = stats.chi2.isf(level, dof)
+def _lambda50(crit, dof):
+    """Noncentrality at which a chi-square statistic on ``dof`` passes ``crit`` half the time."""
     return optimize.brentq(lambda lam: stats.ncx2.sf(crit, dof, lam) - 0.5, 1e-6, 1e7)
 
 
 def lambda50(candidate):
     """Noncentrality at which a 2-dof test at the step's Bonferroni level has 50 % power."""
     grid = len(_shape_grid(effect_model_parameters(candidate), RATE_HZ))
-    return _lambda50(SIGNIFICANCE / (len(EFFECTS) * grid), 2)
+    return _lambda50(stats.chi2.isf(SIGNIFICANCE / (len(EFFECTS) * grid), 2), 2)
+
+
+def _critical(dofs):
+    """Each part's critical statistic for a gap at ``GAP_LEFT_P`` (views.FeatureSpace.gaps).
+
+    One part: its chi-square's. The band view's octaves: their common critical
+    ratio ``g^2`` to their dof, ``prod_j F_chi2(g^2 nu_j; nu_j) = 1 - GAP_LEFT_P``.
+    """
+    if len(dofs) == 1:
+        return [stats.chi2.isf(GAP_LEFT_P, dofs[0])]
+    g2 = optimize.brentq(
+        lambda g: np.sum([stats.chi2.logcdf(g * d, d) for d in dofs]) - np.log1p(-GAP_LEFT_P),
+        1.0,
+        1e3,
+    )
+    return [g2 * d for d in dofs]
 
 
 def view_limit(problem, fit, free_effect, free_clean):
@@ -227,11 +242,11 @@ def view_limit(problem, fit, free_effect, free_clean):
     hat = space.hat_dof(list(fit.columns))
     best = 0.0
     for name, parts in space.components(f).items():
-        level = GAP_LEFT_P / len(parts)  # the band view: its largest octave's
-        for p, h in zip(parts, hat[name], strict=True):
-            dof = p.size - h
-            if dof >= 1:
-                best = max(best, float(np.sum(p**2)) / _lambda50(level, dof))
+        dofs = [p.size - h for p, h in zip(parts, hat[name], strict=True)]
+        if min(dofs) < 1:
+            continue
+        for p, dof, crit in zip(parts, dofs, _critical(dofs), strict=True):
+            best = max(best, float(np.sum(p**2)) / _lambda50(crit, dof))
     return math.sqrt(best)
 
 
