@@ -51,6 +51,7 @@ ALL_DRIVE = MachineModel(
     spike_y_m_s2=0.015,
     vibration_x_m_s2=0.01,
     vibration_y_m_s2=0.02,
+    vibration_start_stop_m_s2=-0.015,
 )
 
 
@@ -212,3 +213,46 @@ def test_spike_sign_and_timing_around_the_reversal(onset, peak):
     # the position peak, h e^-2 (4 h / e^2 at u = 2), is at (onset + 2) tau
     j = int(np.argmax(np.abs(p[0])))
     assert t[j] == pytest.approx((onset + 2) * tau, abs=2e-5)
+
+
+@pytest.mark.parametrize("size", [0.02, -0.01])
+def test_structural_mode_rung_at_block_starts_and_ends(size):
+    # the mode at 40 Hz rung along the direction of motion at each start and end of motion
+    machine = MachineModel(vibration_start_stop_m_s2=size, vibration_hz=40.0)
+    # a dwell long enough for one block's end ringing to have died at the next one's start
+    program = replace(PROGRAM, dwell_s=3.0)
+    timeline = build_timeline(program, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
+    t = np.arange(0.0, timeline.duration_s, 1e-4)
+    _, _, plain = carriage_motion(timeline, MachineModel(), t)
+    _, _, rung = carriage_motion(timeline, machine, t)
+    ring = rung - plain
+    edges = [tk for b in timeline.blocks for tk in (b.t_start_s, b.t_end_s)]
+    near = np.zeros(t.size, bool)
+    for tk in edges:
+        near |= (t >= tk) & (t < tk + 35.0 / (0.05 * 2 * math.pi * 40.0))
+    assert np.all(ring[~near] == 0.0)
+    wn = 2 * math.pi * 40.0
+    period = 2 * math.pi / (wn * math.sqrt(1 - 0.05**2))
+    for b in timeline.blocks:
+        for tk, phi in ((b.t_start_s, b.start_angle_rad), (b.t_end_s, b.end_angle_rad)):
+            direction = b.sign * np.array([-math.sin(phi), math.cos(phi)])
+            at = np.array([tk, tk + 10 * period])
+            ring = (
+                carriage_motion(timeline, machine, at)[2]
+                - carriage_motion(timeline, MachineModel(), at)[2]
+            )
+            # the initial acceleration, along the direction of motion
+            assert_allclose(ring[0], size * direction, rtol=1e-9, atol=1e-12)
+            # ten periods later: rung at the damped frequency, decayed with the damping ratio
+            decayed = ring[0] * math.exp(-0.05 * wn * 10 * period)
+            assert_allclose(ring[1], decayed, rtol=1e-9, atol=1e-12)
+
+
+def test_block_edge_ringing_is_off_by_default_and_in_the_truth():
+    assert MachineModel().vibration_start_stop_m_s2 == 0.0
+    effects = MachineModel(vibration_start_stop_m_s2=0.01).effects()
+    assert effects["structural_vibration"]["start_stop_m_s2"] == 0.01
+    assert (
+        "start_stop_m_s2"
+        not in MachineModel(vibration_x_m_s2=0.01).effects()["structural_vibration"]
+    )

@@ -19,6 +19,8 @@ direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
   (-2: the position peak on the reversal) or leading it (below -2);
 - structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which
   starts with zero position and velocity and acceleration ``D omega_d^2``.
+  The same mode is also rung at each block's start and end of motion, where
+  the feed ramps' acceleration steps (:func:`add_start_stop_vibration`).
 """
 
 import numpy as np
@@ -138,3 +140,31 @@ def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
         p[0][sl] += e * (1.0 - c)
         p[1][sl] += e * (-sigma + sigma * c + wd * s)
         p[2][sl] += e * (sigma**2 + (wd**2 - sigma**2) * c - 2.0 * sigma * wd * s)
+
+
+def add_start_stop_vibration(p, t, times, components, accel_m_s2, frequency_hz, damping):
+    """Add the structural mode rung at block starts and ends of motion, in place.
+
+    The feed ramps step the acceleration at the start and at the end of each
+    block's motion, both times along the direction of motion there; the mode
+    answers with the reversal's oscillation (:func:`add_vibration`), of
+    initial acceleration ``accel_m_s2`` along that direction.
+
+    Parameters
+    ----------
+    p : list of 3 ndarray
+        Axis position, velocity, acceleration, modified in place.
+    t : ndarray, shape (n,)
+        True times, increasing. [s]
+    times : ndarray, shape (n_events,)
+        Block starts and ends of motion, as the axis runs them. [s]
+    components : ndarray, shape (n_events,)
+        This axis's component of the unit direction of motion at each.
+    accel_m_s2 : float
+        Initial acceleration of the oscillation along the direction of motion. [m/s^2]
+    frequency_hz : float
+        Natural frequency. [Hz]
+    damping : float
+        Damping ratio, in (0, 1).
+    """
+    add_vibration(p, t, times, -np.asarray(components), accel_m_s2, frequency_hz, damping)
