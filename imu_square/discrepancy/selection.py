@@ -176,10 +176,12 @@ class Screener:
         for a in range(2):
             blk = ones.block.copy()
             cyc = ones.cycle.copy()
+            transient = ones.transient.copy()
             blk[:, a] = 1 + 1j
             cyc[:, a] = 1 + 1j
+            transient[a] = 1.0
             self.channel.append(
-                space.fit_vector(Features(blk, cyc, ones.reversal, ones.prior)) != 0
+                space.fit_vector(Features(blk, cyc, ones.reversal, transient, ones.prior)) != 0
             )
 
     def _score(self, screen, r, q):

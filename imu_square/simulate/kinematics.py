@@ -90,7 +90,12 @@ def reversal_delays(times, delays):
 
 
 def block_edges(timeline, axis):
-    """Each block's start and end of motion, and the axis's share of the direction there.
+    """The corners of each block's feed ramps, and the axis's share of the acceleration step there.
+
+    A feed ramp steps the acceleration along the direction of motion at its
+    corners: up at the start of motion, back down at the end of the start
+    ramp, down at the start of the stop ramp and back up at the end of motion
+    (the trapezoid's steps; the stop ramp is taken as long as the start's).
 
     Parameters
     ----------
@@ -101,23 +106,31 @@ def block_edges(timeline, axis):
 
     Returns
     -------
-    times : ndarray, shape (2 * n_blocks,)
-        Start and end of each block's motion, in time order. [s]
-    components : ndarray, shape (2 * n_blocks,)
-        The axis's component of the unit direction of motion at each:
-        ``sign * (-sin phi, cos phi)`` at the position angle ``phi`` there.
+    times : ndarray, shape (4 * n_blocks,)
+        The corners, in time order. [s]
+    components : ndarray, shape (4 * n_blocks,)
+        The sign of the step (+1 up along the motion, -1 down) times the
+        axis's component of the unit direction of motion there,
+        ``sign * (-sin phi, cos phi)`` at the position angle ``phi``.
     """
     times, components = [], []
     for b in timeline.blocks:
         phi_end = b.start_angle_rad + b.sign * b.angle_rad
-        for tk, phi in ((b.t_start_s, b.start_angle_rad), (b.t_end_s, phi_end)):
+        ramp_angle = b.sign * 0.5 * b.omega_rad_s * b.ramp_s  # travelled in a ramp
+        corners = (
+            (b.t_start_s, b.start_angle_rad, 1.0),
+            (b.t_start_s + b.ramp_s, b.start_angle_rad + ramp_angle, -1.0),
+            (b.t_end_s - b.ramp_s, phi_end - ramp_angle, -1.0),
+            (b.t_end_s, phi_end, 1.0),
+        )
+        for tk, phi, step in corners:
             times.append(tk)
-            components.append(b.sign * (-math.sin(phi) if axis == 0 else math.cos(phi)))
+            components.append(step * b.sign * (-math.sin(phi) if axis == 0 else math.cos(phi)))
     return np.array(times), np.array(components)
 
 
 def ring_at_block_edges(p, timeline, t, axis, delays, machine):
-    """Add the structural mode rung at the block starts and ends of motion, in place.
+    """Add the structural mode rung at the corners of the feed ramps, in place.
 
     Parameters
     ----------

@@ -48,7 +48,7 @@ A machine file (all sections optional; absent = ideal)::
     accel_y_m_s2 = 0.0
     frequency_hz = 40.0
     damping_ratio = 0.05
-    start_stop_m_s2 = 0.0         # the same mode rung at each block's start and end of motion
+    start_stop_m_s2 = 0.0         # the same mode rung at the corners of the feed ramps
 
     [gravity_coupling]            # carriage tilt leaking g*tilt into a channel
     x_per_x_urad_per_m = 0.0      # tilt seen by x per metre of X travel
@@ -113,9 +113,9 @@ class MachineModel:
     vibration_damping : float
         Damping ratio.
     vibration_start_stop_m_s2 : float
-        Initial acceleration of the same mode rung at each block's start
-        and end of motion (the feed ramps' jerk), along the direction of
-        motion there; signed. [m/s^2]
+        Initial acceleration of the same mode rung at each corner of the
+        feed ramps (where the acceleration steps), along the step (along the
+        direction of motion at the start and the end of motion); signed. [m/s^2]
     tilt_per_m : tuple of 4 float
         Gravity coupling: tilt seen by the x channel per metre of X and of Y
         travel, then by the y channel per metre of X and of Y. [rad/m]
