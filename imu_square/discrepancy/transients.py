@@ -14,9 +14,12 @@ the starting model (recording minus model, unclipped) is searched from one
 ramp before to one ramp after the model's end of the start ramp (or of the
 motion); the last sample beyond :data:`RAMP_SIGMA` white-noise sigmas marks
 the ramp as still running, and the window starts :data:`GUARD_S` after it (or
-after the model's own ramp, if later). A ringing strong enough to cross the
-mark pushes its window later, which costs signal but never false alarms;
-under the null no sample crosses it (5 sigma: 6e-7 per sample).
+after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
+from 10 sigmas to nothing in 8 ms (the time grows as the ramp's length to the
+power 1.5; a trapezoid or an s-curve stops within a millisecond). Under the
+null no sample crosses the mark. A ringing that does cross it moves its
+window later, which costs signal but never a false alarm: the mark is high
+so that a ringing of a few times the noise does not.
 """
 
 import math
@@ -24,9 +27,9 @@ import math
 import numpy as np
 
 # A residual sample this many white-noise sigmas off marks a feed ramp as still running.
-RAMP_SIGMA = 5.0
+RAMP_SIGMA = 10.0
 # From the last such sample to the window's start. [s]
-GUARD_S = 0.02
+GUARD_S = 0.015
 
 
 def _recording_time(model, state, block, tau):
