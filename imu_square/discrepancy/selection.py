@@ -22,7 +22,10 @@ Each step:
    that statistic's and of its sizes' Wald statistic's (the model's fit can
    be short of its optimum on a staircase likelihood, and a refit would
    credit the candidate with the rest), times ``G``, the shapes tried
-   (Bonferroni). The best refit is the step.
+   (Bonferroni). The best refit is the step: refitted to convergence if
+   either p-value is within reach (a trial's two iterations can leave a
+   shape short of its optimum, a ringing's damping traded for its size,
+   and its sizes' Wald test then weak), the larger taken again there.
 3. It joins the model if its adjusted p-value is below ``alpha / m``
    (Bonferroni over the ``m`` candidates still out), ``alpha`` the stated
    significance level (1 % by default); else the growth stops. Effects
