@@ -9,7 +9,9 @@ sensor rotation within +-4 deg); each case hides one effect:
 - its direction: each size parameter at its declared typical value times a
   factor drawn in [0.5, 1.5], with a random sign where the physical range
   allows one (spikes and backlash: either sign per axis; the gravity
-  coupling's four terms all at +-100 urad/m times that factor); its shape
+  coupling's four terms all at +-100 urad/m times that factor; the
+  structural mode rung at the reversals, at the feed ramps' corners (0.01
+  m/s^2, its preset being off) or both, one of the three at random); its shape
   drawn over a realistic range (spike time constant 10-40 ms, starting after,
   centred on or leading the reversal; backlash take-up 2-10 ms, centred on
   the reversal to starting at it, vibration
@@ -97,6 +99,12 @@ def paper_sensor():
     return read_sensor(data_path("sensor_paper.toml"))
 
 
+# Sizes whose preset is off, drawn at this magnitude (display units).
+_OFF_IN_PRESET = {("structural_vibration", "start_stop_m_s2"): 0.01}
+# Where the structural mode is rung: at the reversals, at the feed ramps' corners, or both.
+_RUNG = (("start_stop_m_s2",), ("accel_x_m_s2", "accel_y_m_s2"), ())
+
+
 def draw_direction(effect, rng):
     """Size parameters (display units) of a random direction, and the shapes."""
     sizes, shapes = {}, {}
@@ -104,13 +112,16 @@ def draw_direction(effect, rng):
         if p.role == SHAPE:
             shapes[p.name] = _SHAPES[(effect, p.name)](rng)
             continue
-        typical = p.typical if p.typical else 0.0
+        typical = p.typical if p.typical else _OFF_IN_PRESET.get((effect, p.name), 0.0)
         if effect == "gravity_coupling":
             typical = 100.0
         value = abs(typical) * rng.uniform(0.5, 1.5)
         if p.low < 0 and rng.integers(2):
             value = -value
         sizes[p.name] = value
+    if effect == "structural_vibration":
+        for name in _RUNG[rng.integers(len(_RUNG))]:
+            sizes[name] = 0.0
     return sizes, shapes
 
 

@@ -16,7 +16,7 @@ lost motion             backlash / over-compensated, contact 150 / 400 Hz    bac
 servo                   pure delay / first-order lag, of x or of y           servo_mismatch
 friction mode           a mode rung by friction at reversals, 30 / 80 Hz     structural_vibration
 straightness            quadratic bend of X / of Y, with / without yaw       straightness_yaw
-block-start ringing     a mode rung by the feed ramps, 41 / 80 Hz            (none)
+block-start ringing     a mode rung by the feed ramps, 41 / 80 Hz            structural_vibration
 cyclic error            ball-screw lead error of X / of Y, 10 / 20 mm        (none)
 ======================  ===================================================  =====================
 
@@ -103,7 +103,7 @@ FAMILIES = {
         "straightness_yaw",
         [f"{a} {y}" for a in ("X", "Y") for y in ("bend", "bend + yaw")],
     ),
-    "block_start_ringing": (None, ["41 Hz", "80 Hz"]),
+    "block_start_ringing": ("structural_vibration", ["41 Hz", "80 Hz"]),
     "cyclic_error": (None, ["X 10 mm", "Y 20 mm"]),
 }
 

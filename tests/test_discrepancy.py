@@ -67,7 +67,7 @@ def test_views_of_clean_recordings_follow_their_null_distribution():
         nu = problem.space.fit_vector(base.residual).size - len(params)
         fit_p.append(stats.chi2.sf(base.rss, nu))
     for v in VIEWS:
-        # uniform p-values (Kolmogorov-Smirnov, 8 views at 1e-3 each)
+        # uniform p-values (Kolmogorov-Smirnov, 9 views at 1e-3 each)
         assert stats.kstest(p_values[v], "uniform").pvalue > 1e-3, v
         if v != "band":  # the band view is a maximum over octaves: its mean exceeds 1
             sd = math.sqrt(2 / dof[v] / n)  # of the mean of chi2(nu)/nu over n runs

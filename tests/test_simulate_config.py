@@ -62,8 +62,10 @@ def test_machine_file_units(tmp_path):
         "[servo_mismatch]\ntau_x_ms = 1.5\nmodel = 'first_order'\n"
         "[straightness_yaw]\nx_um = 4\nyaw_x = true\n"
         "[gravity_coupling]\nx_per_y_urad_per_m = 100\n"
+        "[structural_vibration]\nstart_stop_m_s2 = -0.03\n"
     )
     m = read_machine(path)
+    assert m.vibration_start_stop_m_s2 == -0.03
     assert m.name == "m1" and m.ramp_s == 0.2 and m.ramp_profile == "s_curve"
     assert_allclose(m.geometry.machine_squareness_rad, -12.5e-6, rtol=1e-12)
     assert_allclose(m.geometry.machine_squareness_rate_rad_s, 1e-9, rtol=1e-12)

@@ -51,6 +51,7 @@ ALL_DRIVE = MachineModel(
     spike_y_m_s2=0.015,
     vibration_x_m_s2=0.01,
     vibration_y_m_s2=0.02,
+    vibration_start_stop_m_s2=-0.015,
 )
 
 
@@ -212,3 +213,77 @@ def test_spike_sign_and_timing_around_the_reversal(onset, peak):
     # the position peak, h e^-2 (4 h / e^2 at u = 2), is at (onset + 2) tau
     j = int(np.argmax(np.abs(p[0])))
     assert t[j] == pytest.approx((onset + 2) * tau, abs=2e-5)
+
+
+@pytest.mark.parametrize("size", [0.02, -0.01])
+def test_structural_mode_rung_at_the_corners_of_the_feed_ramps(size):
+    # the mode at 40 Hz rung along the acceleration step at each corner of the ramps
+    machine = MachineModel(vibration_start_stop_m_s2=size, vibration_hz=40.0)
+    # a dwell long enough for one block's end ringing to have died at the next one's start
+    program = replace(PROGRAM, dwell_s=3.0)
+    timeline = build_timeline(program, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
+    t = np.arange(0.0, timeline.duration_s, 1e-4)
+    _, _, plain = carriage_motion(timeline, MachineModel(), t)
+    _, _, rung = carriage_motion(timeline, machine, t)
+    ring = rung - plain
+    ramp = machine.ramp_s
+    corners = [
+        tk for b in timeline.blocks for tk in (b.t_start_s, b.t_start_s + ramp, b.t_end_s - ramp)
+    ] + [b.t_end_s for b in timeline.blocks]
+    near = np.zeros(t.size, bool)
+    for tk in corners:
+        near |= (t >= tk) & (t < tk + 35.0 / (0.05 * 2 * math.pi * 40.0))
+    assert np.all(ring[~near] == 0.0)
+    wn = 2 * math.pi * 40.0
+    sigma, wd = 0.05 * wn, wn * math.sqrt(1 - 0.05**2)
+    period = 2 * math.pi / wd
+
+    def response(u):
+        # acceleration of the mode rung with unit initial acceleration, u after the step
+        c, s = math.cos(wd * u), math.sin(wd * u)
+        shape = sigma**2 + (wd**2 - sigma**2) * c - 2 * sigma * wd * s
+        return math.exp(-sigma * u) * shape / wd**2
+
+    def rung_at(at):
+        return (
+            carriage_motion(timeline, machine, at)[2]
+            - carriage_motion(timeline, MachineModel(), at)[2]
+        )
+
+    for b in timeline.blocks:
+        ramp_angle = b.sign * 0.5 * b.omega_rad_s * ramp
+        # up along the motion at its start and end, down at the ramps' inner corners
+        steps = [
+            (b.t_start_s, b.start_angle_rad, 1.0),
+            (b.t_start_s + ramp, b.start_angle_rad + ramp_angle, -1.0),
+            (b.t_end_s - ramp, b.end_angle_rad - ramp_angle, -1.0),
+            (b.t_end_s, b.end_angle_rad, 1.0),
+        ]
+        for tk, _, _ in steps:
+            # at each corner and five periods later: the steps so far, each rung at the damped
+            # frequency and decayed with the damping ratio since
+            at = np.array([tk, tk + 5 * period])
+            expected = sum(
+                step
+                * size
+                * b.sign
+                * np.array([-math.sin(phi), math.cos(phi)])
+                * np.array([response(u - tc) for u in at])[:, None]
+                for tc, phi, step in steps
+                if tc <= tk
+            )
+            assert_allclose(rung_at(at), expected, rtol=1e-9, atol=1e-12)
+    # the first corner alone: the step's own initial acceleration, along the motion
+    b = timeline.blocks[0]
+    first = b.sign * np.array([-math.sin(b.start_angle_rad), math.cos(b.start_angle_rad)])
+    assert_allclose(rung_at(np.array([b.t_start_s]))[0], size * first, rtol=1e-9, atol=1e-12)
+
+
+def test_block_edge_ringing_is_off_by_default_and_in_the_truth():
+    assert MachineModel().vibration_start_stop_m_s2 == 0.0
+    effects = MachineModel(vibration_start_stop_m_s2=0.01).effects()
+    assert effects["structural_vibration"]["start_stop_m_s2"] == 0.01
+    assert (
+        "start_stop_m_s2"
+        not in MachineModel(vibration_x_m_s2=0.01).effects()["structural_vibration"]
+    )

@@ -6,7 +6,7 @@ The simulator is the model of the machine and the sensor. When a recording
 disagrees with the model fitted to it by more than the noise, something the
 model lacks is at work. :func:`imu_square.discrepancy.find_discrepancy`
 (``imu-square discrepancy RUN.mcap``) fits the base model (squareness, sensor
-rotation and offsets), measures the gap in eight views, each normalised by the
+rotation and offsets), measures the gap in nine views, each normalised by the
 noise floor (1.0 = explained down to the noise), names the effect of the
 simulator's vocabulary that closes the gap best, adds it, refits, and repeats
 while an effect is significant. The theory is in :doc:`/discrepancy`.

@@ -15,7 +15,8 @@ cycles is the block's cycle-averaged trace; the offset and the circle
 harmonic (``k = 0, 1``) are also kept per cycle, for the trend and the timing
 across cycles. The samples within a window around each axis reversal are
 summed in 5 ms bins (:mod:`imu_square.discrepancy.layout`) for the reversal
-view.
+view, and so are the transient samples after each block's start ramp and end
+of motion, over the blocks of a direction, for the transient view.
 
 All of it is linear in the samples, so the features of ``data - model`` are
 those of the data minus those of the model: both go through the same
@@ -45,6 +46,8 @@ class Features:
         Offset (k = 0) and circle harmonic (k = 1) of each cycle. [m/s^2]
     reversal : ndarray, shape (2, n_groups * n_bins)
         Sums of x (row 0) and y (row 1) samples in each reversal bin. [m/s^2]
+    transient : ndarray, shape (2, 4 * n_transient_bins)
+        Sums of x and y samples in each transient bin. [m/s^2]
     prior : ndarray, shape (n_blocks,)
         Whitened prior on the blocks' time anchors (zero for the recording).
     """
@@ -52,6 +55,7 @@ class Features:
     block: np.ndarray
     cycle: np.ndarray
     reversal: np.ndarray
+    transient: np.ndarray
     prior: np.ndarray
 
     def __sub__(self, other):
@@ -59,13 +63,18 @@ class Features:
             self.block - other.block,
             self.cycle - other.cycle,
             self.reversal - other.reversal,
+            self.transient - other.transient,
             self.prior - other.prior,
         )
 
     def scaled(self, factor):
         """All features times ``factor``."""
         return Features(
-            self.block * factor, self.cycle * factor, self.reversal * factor, self.prior * factor
+            self.block * factor,
+            self.cycle * factor,
+            self.reversal * factor,
+            self.transient * factor,
+            self.prior * factor,
         )
 
 
@@ -98,6 +107,9 @@ class FeatureOperator:
         self._block_starts = np.searchsorted(self._block_of, np.arange(self._n_blocks))
         self._bins = layout.reversal_bin
         self._n_rev = 4 * layout.n_bins
+        self._transient = layout.transient_bin >= 0
+        self._transient_bin = layout.transient_bin[self._transient]
+        self._n_transient = 4 * layout.n_transient_bins
         u = (layout.t_s[self._rows] - layout.cycle_t0_s[:, None]) / layout.period_s
         self._hann = np.sin(np.pi * np.clip(u, 0.0, 1.0)) ** 2 * 2.0
 
@@ -116,7 +128,7 @@ class FeatureOperator:
         Parameters
         ----------
         xy : ndarray, shape (m, 2)
-            x and y at the layout's analysed samples. [m/s^2]
+            x and y at the layout's samples (analysed, then transient). [m/s^2]
 
         Returns
         -------
@@ -131,7 +143,15 @@ class FeatureOperator:
             reversal[a] = np.bincount(
                 self._bins[a][inside], weights=xy[inside, a], minlength=self._n_rev
             )
-        return Features(block, spec[:, :, :2].copy(), reversal, np.zeros(self._n_blocks))
+        transient = np.stack(
+            [
+                np.bincount(
+                    self._transient_bin, weights=xy[self._transient, a], minlength=self._n_transient
+                )
+                for a in range(2)
+            ]
+        )
+        return Features(block, spec[:, :, :2].copy(), reversal, transient, np.zeros(self._n_blocks))
 
     def cycle_spectra(self, xy):
         """Every harmonic of every cycle through a Hann window, for the noise estimate.

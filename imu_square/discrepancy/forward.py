@@ -1,6 +1,6 @@
 """The simulator, run at a recording's analysed samples: the forward model.
 
-For each analysed sample at recording time ``t`` in block ``b`` of run ``r``,
+For each analysed (or transient) sample at recording time ``t`` in block ``b`` of run ``r``,
 the simulator is evaluated at its true time
 
     tau = T_b + anchor_b + (t - t_mid_b) / (1 + ppm 1e-6)
@@ -55,8 +55,10 @@ class ForwardModel:
         self.operator = operator
         self.motion = None if motion is None else motion.placed(LEAD_IN_S, LEAD_OUT_S)
         self._timelines = {}
-        self._t_mid = np.array([b.t_mid_s for b in layout.blocks])[layout.sample_block]
+        self._t_mid = np.array([b.t_mid_s for b in layout.blocks])
         self._index = np.array([b.index for b in layout.blocks])
+        # the simulator takes increasing times; the transient samples follow the analysed ones
+        self._order = np.argsort(layout.t_s, kind="stable")
         self.n_blocks = len(layout.blocks)
         u = np.array([b.u_t_mid_s for b in layout.blocks])
         self._prior_w = 1.0 / u**2
@@ -84,15 +86,43 @@ class ForwardModel:
             self._timelines[key] = model_timeline(self.layout.program, machine, LEAD_IN_S)
         return self._timelines[key]
 
-    def true_times(self, state):
-        """Simulator time of each analysed sample. [s]"""
+    def _times(self, state, t_s, blocks):
+        """Simulator time of recording times ``t_s`` in layout blocks ``blocks``. [s]"""
         tl = self.timeline(state.machine)
         mids = np.array(
             [tl.blocks[i].time_at_progress(0.5 * tl.blocks[i].angle_rad) for i in self._index]
         )
-        anchors = np.asarray(state.anchors_s, dtype=float)[self.layout.sample_block]
+        anchors = np.asarray(state.anchors_s, dtype=float)
         scale = 1.0 + state.sensor.clock_ppm * 1e-6
-        return mids[self.layout.sample_block] + anchors + (self.layout.t_s - self._t_mid) / scale
+        return mids[blocks] + anchors[blocks] + (t_s - self._t_mid[blocks]) / scale
+
+    def true_times(self, state):
+        """Simulator time of each analysed (or transient) sample. [s]"""
+        return self._times(state, self.layout.t_s, self.layout.sample_block)
+
+    def samples_at(self, state, t_s, block):
+        """Noise-free x and y at any recording times of one block (nothing kept).
+
+        Parameters
+        ----------
+        state : ModelState
+            The model.
+        t_s : ndarray
+            Recording times, increasing. [s]
+        block : int
+            Position of their block in the layout.
+
+        Returns
+        -------
+        ndarray, shape (len(t_s), 2)
+            [m/s^2]
+        """
+        m = state.machine
+        tau = self._times(state, np.asarray(t_s, dtype=float), np.full(len(t_s), block))
+        timeline = self.timeline(m)
+        paths = [axis_motion(timeline, m, tau, a) for a in (0, 1)]
+        pos, _, acc = m.geometry.apply(paths[0], paths[1], tau)
+        return sense_motion(m, state.sensor, pos, acc, tau)[:, :2]
 
     def samples(self, state):
         """Noise-free x and y at the analysed samples.
@@ -111,7 +141,7 @@ class ForwardModel:
         m, s = state.machine, state.sensor
         timeline = self.timeline(m)
         when = (tuple(state.anchors_s), s.clock_ppm, m.ramp_s, m.ramp_profile)
-        tau = self._stage("time", when, lambda: self.true_times(state))
+        tau = self._stage("time", when, lambda: self.true_times(state)[self._order])
         keys = [(when, axis_parameters(m, a)) for a in (0, 1)]
         paths = [
             self._stage(f"axis{a}", keys[a], lambda a=a: axis_motion(timeline, m, tau, a))
@@ -120,7 +150,9 @@ class ForwardModel:
         pos, _, acc = self._stage(
             "geometry", (*keys, m.geometry), lambda: m.geometry.apply(paths[0], paths[1], tau)
         )
-        return sense_motion(m, s, pos, acc, tau)[:, :2]
+        out = np.empty((tau.size, 2))
+        out[self._order] = sense_motion(m, s, pos, acc, tau)[:, :2]
+        return out
 
     def prior(self, state):
         """The whitened prior on the anchors: ``(anchor_b - c) / u_b``."""

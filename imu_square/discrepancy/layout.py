@@ -9,12 +9,16 @@ those touched by gaps or clipping); for a test that was not run it comes from
 the simulator's timeline (:func:`layout_from_timeline`), which is how the
 Fisher information of an extra test is computed.
 
-Time maps to angle as in the pipeline: ``phi(t) = phi_mid + sign * omega *
-(t - t_mid)``, anchored at each block's motion midpoint ``t_mid``.
+Besides the analysed cycles it can hold *transient* samples, outside them:
+windows after each block's start ramp and after its end of motion, where a
+mode rung by the feed ramps rings (:func:`with_transients`; where the windows
+start is :mod:`imu_square.discrepancy.transients`'s choice). The transient
+samples come after the analysed ones in :attr:`Layout.t_s` and the other
+per-sample arrays.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -24,6 +28,9 @@ from imu_square.pipeline.squareness import filter_and_segment, trace_cycles
 REVERSAL_BEFORE_S = 0.05
 REVERSAL_AFTER_S = 0.25
 REVERSAL_BIN_S = 0.005
+# Length of each transient window and its bins. [s]
+TRANSIENT_WINDOW_S = 0.25
+TRANSIENT_BIN_S = 0.005
 # The motion midpoint's uncertainty is never taken below this (a tenth of a 1 kHz sample). [s]
 MIN_U_T_MID_S = 1e-5
 
@@ -97,6 +104,12 @@ class Layout:
         Bins per reversal window.
     dropped : tuple of dict
         Cycles the pipeline dropped, with the reason.
+    transient_bin : ndarray of int, shape (m,)
+        Transient bin of each sample (-1 for the analysed ones, which come
+        first): bin ``g * n_transient_bins + j`` is bin ``j`` of group
+        ``g = 2 * (after the end of motion) + (CW)``. Empty: none.
+    n_transient_bins : int
+        Bins per transient window.
     """
 
     program: object
@@ -114,6 +127,13 @@ class Layout:
     reversal_bin: np.ndarray
     n_bins: int
     dropped: tuple = ()
+    transient_bin: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=np.int64))
+    n_transient_bins: int = 1
+
+    @property
+    def n_analysed(self):
+        """Number of analysed samples (the transient ones follow them)."""
+        return int(self.cycle_edges[-1])
 
     @property
     def n_cycles(self):
@@ -155,6 +175,54 @@ def _reversal_bins(t, phi, sample_block, blocks, omega, dt):
     return out, n_bins
 
 
+def with_transients(layout, t_all, windows):
+    """The layout with transient samples added after its analysed ones.
+
+    Parameters
+    ----------
+    layout : Layout
+        Analysed samples only.
+    t_all : ndarray
+        Times of every recorded sample, from the first. [s]
+    windows : list of tuple
+        ``(block position, start, limit, after_end)``: a window of
+        :data:`TRANSIENT_WINDOW_S` from ``start`` (cut at ``limit``) after the
+        block's start ramp, or after its end of motion if ``after_end``. [s]
+
+    Returns
+    -------
+    Layout
+    """
+    bin_s = max(TRANSIENT_BIN_S, layout.dt_s)
+    n_bins = max(1, math.ceil(TRANSIENT_WINDOW_S / bin_s))
+    index, block, bins = [], [], []
+    for b, t0, limit, after_end in windows:
+        group = 2 * int(after_end) + int(layout.blocks[b].sign < 0)
+        i0, i1 = np.searchsorted(t_all, (t0, min(t0 + n_bins * bin_s, limit)))
+        j = np.floor((t_all[i0:i1] - t0) / bin_s).astype(np.int64)
+        index.append(np.arange(i0, i1, dtype=np.int64))
+        block.append(np.full(i1 - i0, b, dtype=np.int64))
+        bins.append(group * n_bins + np.clip(j, 0, n_bins - 1))
+    index, block, bins = (np.concatenate([np.empty(0, np.int64), *x]) for x in (index, block, bins))
+    n = layout.t_s.size
+    t = t_all[index]
+    phi = np.array([layout.blocks[b].phi_mid_rad for b in block]) + np.array(
+        [layout.blocks[b].sign * layout.omega_rad_s for b in block]
+    ) * (t - np.array([layout.blocks[b].t_mid_s for b in block]))
+    return replace(
+        layout,
+        t_s=np.concatenate([layout.t_s, t]),
+        index=np.concatenate([layout.index, index]),
+        phi=np.concatenate([layout.phi, phi]),
+        sample_block=np.concatenate([layout.sample_block, block]),
+        reversal_bin=np.concatenate(
+            [layout.reversal_bin, np.full((2, index.size), -1, dtype=np.int64)], axis=1
+        ),
+        transient_bin=np.concatenate([np.full(n, -1, dtype=np.int64), bins]),
+        n_transient_bins=n_bins,
+    )
+
+
 def _assemble(program, blocks, omega, dt, t_all, cycles, dropped):
     """Build a Layout from blocks and cycle windows ``(block position, i0, i1, t0)``."""
     cycles = sorted(cycles, key=lambda c: (c[0], c[1]))
@@ -185,6 +253,7 @@ def _assemble(program, blocks, omega, dt, t_all, cycles, dropped):
         reversal_bin=bins,
         n_bins=n_bins,
         dropped=tuple(dropped),
+        transient_bin=np.full(index.size, -1, dtype=np.int64),
     )
 
 
@@ -269,7 +338,7 @@ def layout_from_timeline(program, timeline, sample_rate_hz, u_t_mid_s=1e-4):
     t_all = np.arange(math.floor(timeline.duration_s / dt) + 1) * dt
     omega = program.omega_rad_s
     period = 2 * math.pi / omega
-    blocks, cycles = [], []
+    blocks, cycles, windows = [], [], []
     plans = program.blocks()
     for b, (blk, plan) in enumerate(zip(timeline.blocks, plans, strict=True)):
         mid = blk.t_start_s + 0.5 * blk.duration_s
@@ -277,9 +346,14 @@ def layout_from_timeline(program, timeline, sample_rate_hz, u_t_mid_s=1e-4):
         blocks.append(
             BlockInfo(blk.index, plan.run, blk.direction, blk.sign, mid, phi_mid, u_t_mid_s)
         )
+        # the model is the truth here: its windows start right after its ramps
+        later = timeline.blocks[b + 1].t_start_s if b + 1 < len(timeline.blocks) else math.inf
+        windows.append((b, blk.t_start_s + blk.ramp_s, blk.analysed_window_s[0], False))
+        windows.append((b, blk.t_end_s, later, True))
         a0, _ = blk.analysed_window_s
         for j in range(program.cycles_per_direction):
             t0 = a0 + j * period
             i0, i1 = np.searchsorted(t_all, (t0, t0 + period))
             cycles.append((b, int(i0), int(i1), t0))
-    return _assemble(program, blocks, omega, dt, t_all, cycles, ())
+    layout = _assemble(program, blocks, omega, dt, t_all, cycles, ())
+    return with_transients(layout, t_all, windows)

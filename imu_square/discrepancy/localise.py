@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from imu_square.discrepancy.layout import REVERSAL_BEFORE_S, REVERSAL_BIN_S
+from imu_square.discrepancy.layout import REVERSAL_BEFORE_S, REVERSAL_BIN_S, TRANSIENT_BIN_S
 
 # A view whose p-value with the final model is below this holds a gap left unexplained.
 GAP_LEFT_P = 1e-3
@@ -259,6 +259,33 @@ def _reversal_location(curves):
     }
 
 
+def _transient_location(space, residual):
+    """The transient bin with the largest mean residual: which window, direction, channel, when."""
+    layout = space.layout
+    n = layout.n_transient_bins
+    bins = layout.transient_bin[layout.transient_bin >= 0]
+    count = np.bincount(bins, minlength=4 * n).astype(float)
+    best = None
+    for a, axis in enumerate(("x", "y")):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = np.where(count > 0, residual.transient[a] / count, 0.0)
+        i = int(np.argmax(np.abs(mean)))
+        if best is None or abs(mean[i]) > abs(best[1]):
+            best = (axis, float(mean[i]), i)
+    if best is None or not count.any():
+        return None
+    axis, value, i = best
+    group, j = divmod(i, n)
+    bin_s = max(TRANSIENT_BIN_S, layout.dt_s)
+    return {
+        "window": "after the end of motion" if group >= 2 else "after the start ramp",
+        "direction": "cw" if group % 2 else "ccw",
+        "channel": axis,
+        "time_into_window_ms": (j + 0.5) * bin_s * 1e3,
+        "peak_m_s2": value,
+    }
+
+
 def _cycle_location(space, residual, name):
     """The cycle that departs most from its block's mean (trend: offset and circle; timing)."""
     layout = space.layout
@@ -338,6 +365,15 @@ def locate_gaps(space, residual, gaps):
             if band:
                 details["band"] = band
                 parts.append(_band_text(band))
+        elif v.name == "transients":
+            loc = _transient_location(space, residual)
+            if loc:
+                details["transient"] = loc
+                parts.append(
+                    f"largest {loc['time_into_window_ms']:.0f} ms into the window "
+                    f"{loc['window']} ({loc['direction'].upper()}, {loc['channel']} channel, "
+                    f"{loc['peak_m_s2'] * 1e3:+.2g} mm/s²)"
+                )
         else:  # trend, timing
             loc = _cycle_location(space, residual, v.name)
             if loc:

@@ -30,6 +30,11 @@ harmonic of the pipeline's 4 Hz low-pass, at least 10):
     The residual samples within -50 ms to +250 ms of every axis reversal,
     summed in 5 ms bins over all reversals of that axis with the same
     direction of motion after it (backlash, friction spikes, vibration).
+``transients``
+    The residual samples in the windows after each block's start ramp and
+    after its end of motion (:mod:`imu_square.discrepancy.layout`: the ramps
+    themselves are left out), summed in 5 ms bins over the blocks of a
+    direction (a mode rung at block starts and stops).
 ``trend``
     Each cycle's offset and circle harmonic (three numbers per axis) of the
     cycles of one direction over every run, whitened with their covariance
@@ -49,8 +54,9 @@ harmonic of the pipeline's 4 Hz low-pass, at least 10):
     ``P(gap <= g) = prod_j F_chi2(g^2 nu_j; nu_j)``.
 
 The fit and the likelihood-ratio tests use the whitened *fit vector*: each
-block's harmonics 2 to ``K`` and each cycle's offset and circle harmonic
-(whitened block by block with their covariance across cycles).
+block's harmonics 2 to ``K``, each cycle's offset and circle harmonic
+(whitened block by block with their covariance across cycles) and the
+transient view's bins (samples outside the analysed cycles).
 """
 
 import math
@@ -60,7 +66,17 @@ import numpy as np
 from scipy import stats
 from scipy.linalg import block_diag, null_space
 
-VIEWS = ("trace_x", "trace_y", "cw_vs_ccw", "harmonics", "reversals", "trend", "timing", "band")
+VIEWS = (
+    "trace_x",
+    "trace_y",
+    "cw_vs_ccw",
+    "harmonics",
+    "reversals",
+    "transients",
+    "trend",
+    "timing",
+    "band",
+)
 # The pipeline's default low-pass: the trace views reach its harmonic.
 TRACE_CUTOFF_HZ = 4.0
 
@@ -175,6 +191,12 @@ class FeatureSpace:
             1.0 / np.sqrt(noise.sigma2[a] * self._rev_count[a][self._rev_count[a] > 0])
             for a in range(2)
         ]
+        transient = layout.transient_bin[layout.transient_bin >= 0]
+        count = np.bincount(transient, minlength=4 * layout.n_transient_bins).astype(float)
+        self._transient_used = count > 0
+        self._transient_scale = [
+            1.0 / np.sqrt(noise.sigma2[a] * count[self._transient_used]) for a in range(2)
+        ]
         ref = reference.cycle[:, :, 1]
         self._timing_ref = ref
         self._timing_white = []
@@ -205,8 +227,8 @@ class FeatureSpace:
         -------
         ndarray
             Each block's harmonics 2..K (real and imaginary parts), each
-            cycle's offset and circle harmonic, and the prior on the blocks'
-            time anchors.
+            cycle's offset and circle harmonic, the transient bins and the
+            prior on the blocks' time anchors.
         """
         sd = np.sqrt(self.block_var[:, :, 2:] / 2)
         blk = f.block[:, :, 2:] / sd
@@ -219,8 +241,15 @@ class FeatureSpace:
                     self._white[b, a, 1] @ c[:, 1].real,
                     self._white[b, a, 1] @ c[:, 1].imag,
                 ]
+        parts.append(self._transients(f))
         parts.append(f.prior)
         return np.concatenate(parts)
+
+    def _transients(self, f):
+        """The transient bins of both axes, each over its white-noise standard deviation."""
+        return np.concatenate(
+            [f.transient[a][self._transient_used] * self._transient_scale[a] for a in range(2)]
+        )
 
     # -- the views --------------------------------------------------------------
 
@@ -263,6 +292,7 @@ class FeatureSpace:
         out["harmonics"] = [self._harmonic_parts(f.block, self.block_var, 2, min(10, self.k_max))]
         rev = [f.reversal[a][self._rev_count[a] > 0] * self._rev_scale[a] for a in range(2)]
         out["reversals"] = [np.concatenate(rev)]
+        out["transients"] = [self._transients(f)]
         trend = []
         for (_, a, kk), (idx, m) in self._trend.items():
             c = f.cycle[idx, a, kk]

@@ -26,7 +26,7 @@ from imu_square.blas import one_blas_thread
 from imu_square.discrepancy.features import FeatureOperator
 from imu_square.discrepancy.forward import ForwardModel
 from imu_square.discrepancy.identify import Member, signature_correlations, suggest_tests
-from imu_square.discrepancy.layout import layout_from_recording
+from imu_square.discrepancy.layout import layout_from_recording, with_transients
 from imu_square.discrepancy.localise import gaps_left, locate_gaps
 from imu_square.discrepancy.model_fit import Problem
 from imu_square.discrepancy.parameters import (
@@ -37,6 +37,7 @@ from imu_square.discrepancy.parameters import (
 )
 from imu_square.discrepancy.result import DiscrepancyResult, FittedValue, StepReport
 from imu_square.discrepancy.selection import grow
+from imu_square.discrepancy.transients import transient_windows
 from imu_square.discrepancy.views import FeatureSpace
 from imu_square.discrepancy.window_noise import estimate_noise
 from imu_square.errors import AnalysisError, ConfigError
@@ -295,6 +296,26 @@ def fit_base(recording, program, analysis=None, lap=None, motion=None):
     program = _as_run(program, run)
     layout = layout_from_recording(recording, program, analysis)
     lap("pipeline")
+    problem = _problem(recording, layout, motion)
+    params = base_parameters(problem.model.n_blocks)
+    start = _initial_state(recording, run, problem.space.noise, problem.model.n_blocks)
+    start = _align_anchors(problem, start)
+    # the transient windows start after the recording's own feed ramps
+    windows = transient_windows(
+        problem.model,
+        start,
+        recording.time_s,
+        recording.accel[:, :2].astype(np.float64),
+        np.sqrt(problem.space.noise.sigma2),
+    )
+    problem = _problem(recording, with_transients(layout, recording.time_s, windows), motion)
+    lap("features")
+    base = problem.fit(start, params)
+    return problem, base, params
+
+
+def _problem(recording, layout, motion):
+    """The recording's features at a layout, their noise floor and the forward model."""
     operator = FeatureOperator(layout)
     xy = recording.accel[layout.index, :2].astype(np.float64)
     data = operator.transform(xy)
@@ -302,13 +323,7 @@ def fit_base(recording, program, analysis=None, lap=None, motion=None):
         operator.cycle_spectra(xy), layout, recording.sample_rate_hz, recording.duration_s
     )
     space = FeatureSpace(layout, operator, noise, data)
-    model = ForwardModel(layout, operator, motion)
-    problem = Problem(model, space, xy)
-    lap("features")
-    params = base_parameters(model.n_blocks)
-    start = _align_anchors(problem, _initial_state(recording, run, noise, model.n_blocks))
-    base = problem.fit(start, params)
-    return problem, base, params
+    return Problem(ForwardModel(layout, operator, motion), space, xy)
 
 
 def _align_anchors(problem, state, iterations=3, step_s=1e-5):

@@ -19,6 +19,8 @@ direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
   (-2: the position peak on the reversal) or leading it (below -2);
 - structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which
   starts with zero position and velocity and acceleration ``D omega_d^2``.
+  The same mode is also rung at the corners of each block's feed ramps,
+  where the acceleration steps (:func:`add_start_stop_vibration`).
 """
 
 import numpy as np
@@ -138,3 +140,33 @@ def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
         p[0][sl] += e * (1.0 - c)
         p[1][sl] += e * (-sigma + sigma * c + wd * s)
         p[2][sl] += e * (sigma**2 + (wd**2 - sigma**2) * c - 2.0 * sigma * wd * s)
+
+
+def add_start_stop_vibration(p, t, times, components, accel_m_s2, frequency_hz, damping):
+    """Add the structural mode rung at the corners of the feed ramps, in place.
+
+    The feed ramps step the acceleration along the direction of motion at
+    their corners (up at the start of motion and at the end of the stop ramp,
+    down at the end of the start ramp and at the start of the stop ramp); the
+    mode answers each step with the reversal's oscillation
+    (:func:`add_vibration`), of initial acceleration ``accel_m_s2`` along the
+    step.
+
+    Parameters
+    ----------
+    p : list of 3 ndarray
+        Axis position, velocity, acceleration, modified in place.
+    t : ndarray, shape (n,)
+        True times, increasing. [s]
+    times : ndarray, shape (n_events,)
+        The ramps' corners, as the axis runs them. [s]
+    components : ndarray, shape (n_events,)
+        This axis's component of the unit direction of the step at each.
+    accel_m_s2 : float
+        Initial acceleration of the oscillation along the direction of motion. [m/s^2]
+    frequency_hz : float
+        Natural frequency. [Hz]
+    damping : float
+        Damping ratio, in (0, 1).
+    """
+    add_vibration(p, t, times, -np.asarray(components), accel_m_s2, frequency_hz, damping)

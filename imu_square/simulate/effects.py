@@ -389,6 +389,19 @@ EFFECT_PARAMETERS = {
             "machine",
             "vibration_y_m_s2",
         ),
+        # the same mode rung at each block's start and end of motion, along the motion
+        _p(
+            "structural_vibration",
+            "start_stop_m_s2",
+            "m/s²",
+            1.0,
+            -1.0,
+            1.0,
+            0.0,
+            SIZE,
+            "machine",
+            "vibration_start_stop_m_s2",
+        ),
         _p(
             "structural_vibration",
             "frequency_hz",

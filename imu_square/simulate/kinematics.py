@@ -27,7 +27,12 @@ import math
 
 import numpy as np
 
-from imu_square.simulate.drive import add_backlash, add_spikes, add_vibration
+from imu_square.simulate.drive import (
+    add_backlash,
+    add_spikes,
+    add_start_stop_vibration,
+    add_vibration,
+)
 
 SERVO_MODELS = ("pure_lag", "first_order")
 
@@ -84,6 +89,74 @@ def reversal_delays(times, delays):
     return np.array([d for _, d in delays])[k] if len(times) else np.asarray(times)
 
 
+def block_edges(timeline, axis):
+    """The corners of each block's feed ramps, and the axis's share of the acceleration step there.
+
+    A feed ramp steps the acceleration along the direction of motion at its
+    corners: up at the start of motion, back down at the end of the start
+    ramp, down at the start of the stop ramp and back up at the end of motion
+    (the trapezoid's steps; the stop ramp is taken as long as the start's).
+
+    Parameters
+    ----------
+    timeline : Timeline or SampledMotion
+        The commanded path.
+    axis : int
+        0 for X, 1 for Y.
+
+    Returns
+    -------
+    times : ndarray, shape (4 * n_blocks,)
+        The corners, in time order. [s]
+    components : ndarray, shape (4 * n_blocks,)
+        The sign of the step (+1 up along the motion, -1 down) times the
+        axis's component of the unit direction of motion there,
+        ``sign * (-sin phi, cos phi)`` at the position angle ``phi``.
+    """
+    times, components = [], []
+    for b in timeline.blocks:
+        phi_end = b.start_angle_rad + b.sign * b.angle_rad
+        ramp_angle = b.sign * 0.5 * b.omega_rad_s * b.ramp_s  # travelled in a ramp
+        corners = (
+            (b.t_start_s, b.start_angle_rad, 1.0),
+            (b.t_start_s + b.ramp_s, b.start_angle_rad + ramp_angle, -1.0),
+            (b.t_end_s - b.ramp_s, phi_end - ramp_angle, -1.0),
+            (b.t_end_s, phi_end, 1.0),
+        )
+        for tk, phi, step in corners:
+            times.append(tk)
+            components.append(step * b.sign * (-math.sin(phi) if axis == 0 else math.cos(phi)))
+    return np.array(times), np.array(components)
+
+
+def ring_at_block_edges(p, timeline, t, axis, delays, machine):
+    """Add the structural mode rung at the corners of the feed ramps, in place.
+
+    Parameters
+    ----------
+    p : list of 3 ndarray
+        Axis position, velocity, acceleration after the servo, modified in place.
+    timeline : Timeline or SampledMotion
+        The commanded path.
+    t : ndarray, shape (n,)
+        True times, increasing. [s]
+    axis : int
+        0 for X, 1 for Y.
+    delays : list of tuple
+        The servo's delay of each block span (:func:`servo_path`).
+    machine : MachineModel
+        The machine (``vibration_start_stop_m_s2``, the mode's frequency and damping).
+    """
+    m = machine
+    if not m.vibration_start_stop_m_s2:
+        return
+    times, components = block_edges(timeline, axis)
+    times = times + reversal_delays(times, delays)
+    add_start_stop_vibration(
+        p, t, times, components, m.vibration_start_stop_m_s2, m.vibration_hz, m.vibration_damping
+    )
+
+
 def carriage_motion(timeline, machine, t):
     """Actual position, velocity and acceleration of the carriage.
 
@@ -117,6 +190,7 @@ def carriage_motion(timeline, machine, t):
             )
             add_spikes(p, t, times, directions, spike, m.spike_tau_s, m.spike_onset)
             add_vibration(p, t, times, directions, vibration, m.vibration_hz, m.vibration_damping)
+        ring_at_block_edges(p, timeline, t, axis, delays, m)
         paths.append(p)
     return m.geometry.apply(paths[0], paths[1], t)
 

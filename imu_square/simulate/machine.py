@@ -48,6 +48,7 @@ A machine file (all sections optional; absent = ideal)::
     accel_y_m_s2 = 0.0
     frequency_hz = 40.0
     damping_ratio = 0.05
+    start_stop_m_s2 = 0.0         # the same mode rung at the corners of the feed ramps
 
     [gravity_coupling]            # carriage tilt leaking g*tilt into a channel
     x_per_x_urad_per_m = 0.0      # tilt seen by x per metre of X travel
@@ -111,6 +112,10 @@ class MachineModel:
         Natural frequency of the structure. [Hz]
     vibration_damping : float
         Damping ratio.
+    vibration_start_stop_m_s2 : float
+        Initial acceleration of the same mode rung at each corner of the
+        feed ramps (where the acceleration steps), along the step (along the
+        direction of motion at the start and the end of motion); signed. [m/s^2]
     tilt_per_m : tuple of 4 float
         Gravity coupling: tilt seen by the x channel per metre of X and of Y
         travel, then by the y channel per metre of X and of Y. [rad/m]
@@ -135,6 +140,7 @@ class MachineModel:
     vibration_y_m_s2: float = 0.0
     vibration_hz: float = 40.0
     vibration_damping: float = 0.05
+    vibration_start_stop_m_s2: float = 0.0
     tilt_per_m: tuple = (0.0, 0.0, 0.0, 0.0)
 
     def effects(self):
@@ -181,13 +187,15 @@ class MachineModel:
                 "tau_s": self.spike_tau_s,
                 "onset_tau": self.spike_onset,
             }
-        if self.vibration_x_m_s2 or self.vibration_y_m_s2:
+        if self.vibration_x_m_s2 or self.vibration_y_m_s2 or self.vibration_start_stop_m_s2:
             out["structural_vibration"] = {
                 "accel_x_m_s2": self.vibration_x_m_s2,
                 "accel_y_m_s2": self.vibration_y_m_s2,
                 "frequency_hz": self.vibration_hz,
                 "damping_ratio": self.vibration_damping,
             }
+            if self.vibration_start_stop_m_s2:
+                out["structural_vibration"]["start_stop_m_s2"] = self.vibration_start_stop_m_s2
         if any(self.tilt_per_m):
             out["gravity_coupling"] = dict(
                 zip(
@@ -227,6 +235,7 @@ _LAYOUT = {
         "accel_y_m_s2": 0.0,
         "frequency_hz": 40.0,
         "damping_ratio": 0.05,
+        "start_stop_m_s2": 0.0,
     },
     "gravity_coupling": {
         "x_per_x_urad_per_m": 0.0,
@@ -321,6 +330,7 @@ def machine_from_mapping(doc, source="<machine>"):
         vibration_y_m_s2=vibration.number("accel_y_m_s2", -100.0, 100.0),
         vibration_hz=vibration.number("frequency_hz", 0.0, 1e4, lo_open=True),
         vibration_damping=vibration.number("damping_ratio", 0.0, 1.0, lo_open=True, hi_open=True),
+        vibration_start_stop_m_s2=vibration.number("start_stop_m_s2", -100.0, 100.0),
         tilt_per_m=tilt,
     )
 

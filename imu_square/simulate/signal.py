@@ -18,7 +18,12 @@ and clipping, sample for sample (``tests/test_simulate_effects.py`` checks).
 """
 
 from imu_square.simulate.drive import add_backlash, add_spikes, add_vibration
-from imu_square.simulate.kinematics import carriage_tilt, reversal_delays, servo_path
+from imu_square.simulate.kinematics import (
+    carriage_tilt,
+    reversal_delays,
+    ring_at_block_edges,
+    servo_path,
+)
 from imu_square.simulate.trajectory import build_timeline
 
 
@@ -54,8 +59,8 @@ def axis_parameters(machine, axis):
     Returns
     -------
     tuple
-        Servo lag, backlash, spike and vibration sizes of that axis and the
-        shared shapes. [SI]
+        Servo lag, backlash, spike and vibration sizes of that axis, the
+        shared shapes and the vibration at block starts and ends. [SI]
     """
     m = machine
     own = (
@@ -72,6 +77,7 @@ def axis_parameters(machine, axis):
         m.spike_onset,
         m.vibration_hz,
         m.vibration_damping,
+        m.vibration_start_stop_m_s2,
     )
 
 
@@ -94,7 +100,7 @@ def axis_motion(timeline, machine, t_s, axis):
     list of 3 ndarray
         [m, m/s, m/s^2]
     """
-    tau, lost, spike, vibration, _, take_up, take_up_onset, spike_tau, onset, hz, damping = (
+    tau, lost, spike, vibration, _, take_up, take_up_onset, spike_tau, onset, hz, damping, _ = (
         axis_parameters(machine, axis)
     )
     p, delays = servo_path(timeline, t_s, axis, tau, machine.servo_model)
@@ -104,6 +110,7 @@ def axis_motion(timeline, machine, t_s, axis):
         add_backlash(p, t_s, times, directions, initial, lost, take_up, take_up_onset)
         add_spikes(p, t_s, times, directions, spike, spike_tau, onset)
         add_vibration(p, t_s, times, directions, vibration, hz, damping)
+    ring_at_block_edges(p, timeline, t_s, axis, delays, machine)
     return p
 
 

@@ -5,7 +5,8 @@ acceptance set (issue 22, section 3), on a short circle at 200 Hz so that the
 whole module runs in well under a minute: each effect with a candidate is
 named in a shape ``simulate/`` does not use (the generator's spikes centred on
 or led by a compensation pulse, inward or outward; over-compensated lost
-motion through a play operator; a first-order servo lag), a clean recording
+motion through a play operator; a first-order servo lag; a mode rung by its
+raised-cosine feed ramps), a clean recording
 names nothing, an effect with no candidate of its shape leaves a headline that
 says a gap is left, and every headline obeys the rule of section 2
 (:func:`~imu_square.discrepancy.result.headline_is_honest`). A friction-rung
@@ -123,16 +124,21 @@ def test_a_friction_flip_slower_than_the_mode_is_a_lost_motion():
     assert fitted["backlash.take_up_ms"].value == pytest.approx(take_up_ms, rel=0.25)
 
 
-# --------------------------------------------------------------------------- known disagreements
+# ------------------------------------------------------------------ ringing at block starts
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="a mode rung by the feed ramps at block starts rings in the overshoot, "
-    "which no view looks at: every view reads the noise and the headline says explained",
-)
-def test_known_ringing_at_block_starts_leaves_a_gap():
-    mode = {"freq_hz": 41.0, "zeta": 0.05, "participation": 0.05}
-    result, _ = _run({"mode_x": mode, "mode_y": dict(mode)})
-    assert not result.explained
+def test_a_mode_rung_by_the_feed_ramps_is_named():
+    # The generator's mode at 41 Hz, base-excited by its 0.2 s raised-cosine feed ramps, rings
+    # after each start ramp and each end of motion (the transient view's windows). Its detection
+    # limit here, as benchmarks/discrepancy_independent.py defines it (50 % power of a 2-dof test
+    # at 0.01 / (11 x 20 shapes), lambda50 = 19.0, against lambda = 286 kappa^2 of the fit vector
+    # at zeta = 0.05), is a participation of 0.26. At 0.05 it rings below what any detector can
+    # see (an ideal matched one: 2.9 sigma over the whole recording, 1.0 outside the ramps);
+    # this case is drawn at 3.1 times the limit.
+    mode = {"freq_hz": 41.0, "zeta": 0.05, "participation": 0.8}
+    result, named = _run({"mode_x": mode, "mode_y": dict(mode)})
+    assert "structural_vibration" in named, result.headline()
+    values = {v.name: v.value for v in result.model}
+    assert values["structural_vibration.start_stop_m_s2"] != 0.0
+    # the windows hold about ten periods: 2 % of frequency is a fifth of a period at their end
+    assert values["structural_vibration.frequency_hz"] == pytest.approx(41.0, rel=0.02)

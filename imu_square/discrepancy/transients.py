@@ -1,0 +1,97 @@
+"""Where the transient windows start: after the feed ramps, as the recording ran them.
+
+A mode rung by the feed ramps rings after each block's start ramp and after
+its end of motion, outside the analysed cycles. The ramps themselves are left
+out of the comparison: a controller's ramp has its own shape and length,
+which the model does not fit, and inside it recording and model differ by up
+to a hundred times the noise (the independent generator's 0.2 s raised-cosine
+ramp against our 0.15 s trapezoid). Starting the windows a fixed margin after
+the model's ramps would have to allow for the longest ramp a controller might
+run, and lose most of a ringing that decays in a tenth of a second.
+
+So each window starts where the recording's ramp has ended: the residual of
+the starting model (recording minus model, unclipped) is searched from one
+ramp before to one ramp after the model's end of the start ramp (or of the
+motion); the last sample beyond :data:`RAMP_SIGMA` white-noise sigmas marks
+the ramp as still running, and the window starts :data:`GUARD_S` after it (or
+after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
+from 10 sigmas to nothing in 8 ms (the time grows as the ramp's length to the
+power 1.5; a trapezoid or an s-curve stops within a millisecond). Under the
+null no sample crosses the mark. A ringing that does cross it moves its
+window later, which costs signal but never a false alarm: the mark is high
+so that a ringing of a few times the noise does not.
+"""
+
+import math
+
+import numpy as np
+
+# A residual sample this many white-noise sigmas off marks a feed ramp as still running.
+RAMP_SIGMA = 10.0
+# From the last such sample to the window's start. [s]
+GUARD_S = 0.015
+
+
+def _recording_time(model, state, block, tau):
+    """Recording time of simulator time ``tau`` in layout block ``block`` (inverse of the map)."""
+    b = model.layout.blocks[block]
+    tl = model.timeline(state.machine).blocks[b.index]
+    mid = tl.time_at_progress(0.5 * tl.angle_rad)
+    scale = 1.0 + state.sensor.clock_ppm * 1e-6
+    return b.t_mid_s + (tau - mid - state.anchors_s[block]) * scale
+
+
+def _last_crossing(model, state, block, t_all, xy_all, sigma, lo, hi):
+    """Time of the last sample in ``[lo, hi)`` whose residual crosses the mark, or -inf. [s]"""
+    i0, i1 = np.searchsorted(t_all, (lo, hi))
+    if i1 <= i0:
+        return -math.inf
+    t = t_all[i0:i1]
+    r = xy_all[i0:i1] - model.samples_at(state, t, block)
+    over = np.any(np.abs(r) > RAMP_SIGMA * sigma, axis=1)
+    return float(t[over][-1]) if over.any() else -math.inf
+
+
+def transient_windows(model, state, t_all, xy_all, sigma):
+    """The transient windows of every block, placed after the recording's ramps.
+
+    Parameters
+    ----------
+    model : ForwardModel
+        The forward model on the analysed samples.
+    state : ModelState
+        The starting model (anchors aligned).
+    t_all : ndarray, shape (n,)
+        Times of every recorded sample. [s]
+    xy_all : ndarray, shape (n, 2)
+        x and y of every recorded sample. [m/s^2]
+    sigma : ndarray, shape (2,)
+        White-noise standard deviation of x and y per sample. [m/s^2]
+
+    Returns
+    -------
+    list of tuple
+        ``(block position, start, limit, after_end)`` for
+        :func:`~imu_square.discrepancy.layout.with_transients`.
+    """
+    layout = model.layout
+    n = layout.n_analysed
+    blocks = layout.sample_block[:n]
+    motions = []
+    for b in range(len(layout.blocks)):
+        tl = model.timeline(state.machine).blocks[layout.blocks[b].index]
+        start, end = (_recording_time(model, state, b, t) for t in (tl.t_start_s, tl.t_end_s))
+        analysed = layout.t_s[:n][blocks == b]
+        motions.append((start, end, tl.ramp_s, analysed[0], analysed[-1]))
+    out = []
+    for b, (start, end, ramp, first, last) in enumerate(motions):
+        later = motions[b + 1][0] - motions[b + 1][2] if b + 1 < len(motions) else math.inf
+        for edge, lo, hi, after_end in (
+            (start + ramp, start, first, False),
+            (end, last, later, True),
+        ):
+            seen = _last_crossing(
+                model, state, b, t_all, xy_all, sigma, max(edge - ramp, lo), min(edge + ramp, hi)
+            )
+            out.append((b, max(edge, seen) + GUARD_S, hi, after_end))
+    return out
