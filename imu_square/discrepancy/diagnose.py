@@ -39,8 +39,9 @@ trend has to start below the detection limit to be seen early.
    scaled up by ``sqrt(rss / dof)`` when that exceeds 1 (what the fixed set
    does not explain is not white noise).
 
-Each Jacobian costs one simulator run per parameter: on the paper's test
-(200 s at 1 kHz) with six effects, about 3 s in all (``benchmarks/diagnostics.py``).
+Each Jacobian costs one simulator run per parameter (the base model's come
+with its fit): on the paper's test (200 s at 1 kHz) with six effects, about
+80 runs and 2-3.5 s in all (``benchmarks/diagnostics.py``).
 """
 
 import math
