@@ -195,6 +195,15 @@ def test_chapman_yaw_rotates_the_sensor_with_the_carriage():
     assert_allclose(truth["local_machine_squareness_rad"], 15e-6, rtol=1e-12)
 
 
+def test_the_yaw_of_a_quartic_form_on_both_sides_of_the_centre_is_its_slope():
+    # X**3 is the reference: the library's power, on negative X as much as on positive
+    g = chapman_machine(7, yaw=True)
+    x = np.linspace(-0.375, 0.375, 10001)
+    reference = g.k_x * x + 4 * g.q_x * x**3 - g.k_y * 0.1
+    # atol: 1e-14 of the yaw (~1e-4 rad), where the two terms cancel
+    assert_allclose(g.carriage_yaw(x, 0.1), reference, rtol=1e-13, atol=1e-18)
+
+
 @pytest.mark.parametrize("onset", [0.0, -2.0, -4.0])
 @pytest.mark.parametrize("peak", [0.02, -0.03])
 def test_spike_sign_and_timing_around_the_reversal(onset, peak):

@@ -149,3 +149,15 @@ def test_gain_and_bias():
     # at rest, before the first block: x, y read the bias; z reads (1 + g_z) g + bias
     rest = rec.accel[:100].astype(float)
     assert_allclose(rest.mean(axis=0), [0.01 * G, -0.005 * G, 1.001 * G + 0.02 * G], rtol=1e-6)
+
+
+def test_a_sensor_without_drift_senses_as_one_whose_drift_is_nil():
+    # the one beta of a sensor without drift against the array of a drift of zero size
+    sensor = SensorModel(eps_c_rad=math.radians(2.1), beta_rad=40e-6, tilt_rad=(3e-5, -2e-5))
+    rng = np.random.default_rng(3)
+    acc, t = rng.normal(0.0, 1.0, (5000, 2)), np.linspace(0.0, 100.0, 5000)
+    yaw = rng.normal(0.0, 1e-4, 5000)
+    nil = replace(sensor, beta_0_rad=sensor.beta_rad)
+    assert_allclose(
+        sensor.sense(acc, (0.0, 0.0), yaw, t), nil.sense(acc, (0.0, 0.0), yaw, t), rtol=1e-15
+    )

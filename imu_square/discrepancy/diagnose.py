@@ -39,8 +39,9 @@ trend has to start below the detection limit to be seen early.
    scaled up by ``sqrt(rss / dof)`` when that exceeds 1 (what the fixed set
    does not explain is not white noise).
 
-Each Jacobian costs one simulator run per parameter: on the paper's test
-(200 s at 1 kHz) with six effects, about 3 s in all (``benchmarks/diagnostics.py``).
+Each Jacobian costs one simulator run per parameter (the base model's come
+with its fit): on the paper's test (200 s at 1 kHz) with six effects, about
+80 runs and 2-3.5 s in all (``benchmarks/diagnostics.py``).
 """
 
 import math
@@ -153,19 +154,26 @@ def _held_shapes(effects, shapes):
     return sizes, held
 
 
-def _identifiable(problem, state, base_params, sizes):
-    """The sizes this test determines: pivoted QR of their derivatives, base projected out."""
-    cols = problem.columns(state, [*base_params, *sizes])
-    jac = np.column_stack([problem.space.fit_vector(c) for c in cols])
-    q, _ = np.linalg.qr(jac[:, : len(base_params)])
-    m = jac[:, len(base_params) :]
+def _identifiable(problem, state, base, sizes):
+    """The sizes this test determines: pivoted QR of their derivatives, base projected out.
+
+    ``state`` is the base model's fit with the effects' shapes held and their
+    sizes zero; a shape does nothing while its sizes are zero, so the base
+    model's own derivatives at its fit stand for the base parameters (one
+    simulator run a base parameter fewer).
+    """
+    n_base = len(base.params)
+    cols = problem.columns(state, sizes)
+    jac = np.column_stack([base.jacobian, *(problem.space.fit_vector(c) for c in cols)])
+    q, _ = np.linalg.qr(jac[:, :n_base])
+    m = jac[:, n_base:]
     m = m - q @ (q.T @ m)
     span = np.array([p.declared.high - p.declared.low for p in sizes]) / 2
     _, rr, piv = linalg.qr(m * span, mode="economic", pivoting=True)
     diag = np.abs(np.diag(rr))
     rank = int(np.sum((diag >= IDENTIFIABLE_SD) & (diag >= 1e-8 * diag.max())))
     keep = sorted(piv[:rank].tolist())
-    columns = [*range(len(base_params)), *(len(base_params) + i for i in keep)]
+    columns = [*range(n_base), *(n_base + i for i in keep)]
     return [sizes[i] for i in keep], jac[:, columns]
 
 
@@ -218,7 +226,7 @@ def fit_effects(recording, program, effects, shapes=None, analysis=None, max_ste
     start = base.state
     for p, value in held.items():
         start = p.set(start, value)
-    free, jac = _identifiable(problem, start, base_params, sizes)
+    free, jac = _identifiable(problem, start, base, sizes)
     params = [*base_params, *free]
     x = np.array([p.get(start) for p in params])
     state, steps, clipped = start, 0, False

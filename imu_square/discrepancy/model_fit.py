@@ -63,9 +63,16 @@ class FitOutcome:
 
 
 def _remember(store, state, compute, keep=4):
-    """``compute()`` for ``state``, kept (by identity) for the last ``keep`` states."""
+    """``compute()`` for ``state``, kept (by identity) for the ``keep`` states last asked.
+
+    The least recently asked goes first: a Jacobian's columns ask for their
+    state once a column, so it outlasts the perturbed ones and the next
+    step's residual finds it (first in, first out evicted it after four
+    columns: a simulator run more a Jacobian).
+    """
     key = id(state)
     if key in store and store[key][0] is state:
+        store[key] = store.pop(key)  # now the most recent
         return store[key][1]
     value = compute()
     if len(store) >= keep:

@@ -181,7 +181,8 @@ class SensorModel:
         # machine frame -> orthogonal sensor frame, plus the sensor's own mounting tilt
         rx = c * fx + s * fy + G * self.tilt_rad[0]
         ry = -s * fx + c * fy + G * self.tilt_rad[1]
-        beta = self.beta_at(t)
+        # without a warm-up drift, beta is one number: its sine once, not once a sample
+        beta = self.beta_rad if self.beta_0_rad is None else self.beta_at(t)
         out = np.empty((len(t), 3))
         out[:, 0] = rx
         out[:, 1] = -np.sin(beta) * rx + np.cos(beta) * ry
