@@ -75,10 +75,12 @@ ACCEPTANCE_RATE_HZ = 500.0
 RATIO_RANGE = (0.5, 30.0)
 RATIO_BINS = (0.5, 1.0, 2.0, 3.0, 5.0, 10.0, 30.0)
 
+# Each effect's shapes are drawn in this table's order (after its sizes), not in the
+# order of their declaration: a declaration reordered for the scan keeps the set's draws.
 _SHAPES = {
-    ("reversal_spikes", "tau_ms"): lambda r: math.exp(r.uniform(math.log(10), math.log(40))),
     # after the reversal, centred on it, or leading it
     ("reversal_spikes", "onset_tau"): lambda r: float(r.choice([0.0, -2.0, -4.0])),
+    ("reversal_spikes", "tau_ms"): lambda r: math.exp(r.uniform(math.log(10), math.log(40))),
     ("backlash", "take_up_ms"): lambda r: r.uniform(2.0, 10.0),
     ("backlash", "onset"): lambda r: r.uniform(0.0, 3.0),  # centred on ... starting at the reversal
     ("structural_vibration", "frequency_hz"): lambda r: math.exp(
@@ -110,7 +112,6 @@ def draw_direction(effect, rng):
     sizes, shapes = {}, {}
     for p in effect_parameters(effect):
         if p.role == SHAPE:
-            shapes[p.name] = _SHAPES[(effect, p.name)](rng)
             continue
         typical = p.typical if p.typical else _OFF_IN_PRESET.get((effect, p.name), 0.0)
         if effect == "gravity_coupling":
@@ -119,6 +120,9 @@ def draw_direction(effect, rng):
         if p.low < 0 and rng.integers(2):
             value = -value
         sizes[p.name] = value
+    for (e, name), draw in _SHAPES.items():
+        if e == effect:
+            shapes[name] = draw(rng)
     if effect == "structural_vibration":
         for name in _RUNG[rng.integers(len(_RUNG))]:
             sizes[name] = 0.0

@@ -35,7 +35,10 @@ Each step:
 Candidates that explain the gap as well as the one added, within
 ``chi2.isf(alpha_separation, 1)`` of its statistic, cannot be told apart
 from it at this noise level: the step names them together ("one of"), and
-fits each, so that the user sees every reading.
+fits each, so that the user sees every reading. The step's statistic is
+that of a converged fit, a look-alike's of a trial fit two iterations
+short: a look-alike whose trial is within the added one's own gain from
+convergence is refitted to convergence before the comparison.
 """
 
 import copy
@@ -543,6 +546,7 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         if min(p_adj, p_lr) > REFIT_SLACK * threshold:
             break
         new = problem.fit(new.state, new.params)
+        gain = max(outcome.rss - new.rss + neg_lr, 0.0)
         lr = outcome.rss - new.rss
         p_adj = _p_adjusted(new, sb, lr)
         if p_adj > threshold:
@@ -551,6 +555,13 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         for e in remaining:
             if e not in trials and screens[e].dof and screens[e].lr >= lr - crit_sep:
                 trials[e] = _trial(problem, outcome, screens[e], first[e])
+        # a trial is two iterations short of its optimum, as the best's was: those that
+        # its own convergence could bring within crit_sep are refitted to convergence too
+        for e in trials:
+            if e != best and -trials[e][1] >= lr - crit_sep - gain:
+                fit = trials[e][2]
+                fit = problem.fit(fit.state, fit.params)
+                trials[e] = (trials[e][0], fit.rss - outcome.rss, fit, trials[e][3])
         look = [e for e in trials if e != best and -trials[e][1] >= lr - crit_sep]
         added[best] = (list(sb.informative), sb.grid_size)
         after, dropped = _wald_drop(problem, new, added, threshold)

@@ -231,19 +231,8 @@ EFFECT_PARAMETERS = {
     "backlash": (
         _p("backlash", "x_um", "µm", UM, -100.0, 100.0, 5.0, SIZE, "machine", "backlash_x_m"),
         _p("backlash", "y_um", "µm", UM, -100.0, 100.0, 5.0, SIZE, "machine", "backlash_y_m"),
-        _p(
-            "backlash",
-            "take_up_ms",
-            "ms",
-            MS,
-            1.0,
-            50.0,
-            5.0,
-            SHAPE,
-            "machine",
-            "backlash_take_up_s",
-            scan=(2.0, 5.0, 10.0, 20.0),
-        ),
+        # the take-up's timing is scanned as finely as the spike's: a take-up of a few
+        # samples placed a sample off is a spike's shape (issue 22: named reversal_spikes)
         _p(
             "backlash",
             "onset",
@@ -255,7 +244,22 @@ EFFECT_PARAMETERS = {
             SHAPE,
             "machine",
             "backlash_onset",
-            scan=(0.0, 2.0),  # centred on the reversal; starting at it
+            # centred on the reversal, half after it, starting at it; declared before
+            # the take-up, so that a coarse scan of the product grid steps through take-ups
+            scan=(0.0, 1.0, 2.0),
+        ),
+        _p(
+            "backlash",
+            "take_up_ms",
+            "ms",
+            MS,
+            1.0,
+            50.0,
+            5.0,
+            SHAPE,
+            "machine",
+            "backlash_take_up_s",
+            scan=(1.0, 1.4, 2.0, 2.8, 4.0, 5.6, 8.0, 11.0, 16.0),
         ),
     ),
     "scale_mismatch": (
