@@ -198,7 +198,8 @@ def with_transients(layout, t_all, windows):
     index, block, bins = [], [], []
     for b, t0, limit, after_end in windows:
         group = 2 * int(after_end) + int(layout.blocks[b].sign < 0)
-        i0, i1 = np.searchsorted(t_all, (t0, min(t0 + n_bins * bin_s, limit)))
+        # a ramp that runs up to the limit leaves its window empty
+        i0, i1 = np.searchsorted(t_all, (t0, max(t0, min(t0 + n_bins * bin_s, limit))))
         j = np.floor((t_all[i0:i1] - t0) / bin_s).astype(np.int64)
         index.append(np.arange(i0, i1, dtype=np.int64))
         block.append(np.full(i1 - i0, b, dtype=np.int64))

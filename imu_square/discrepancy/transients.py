@@ -12,9 +12,12 @@ run, and lose most of a ringing that decays in a tenth of a second.
 So each window starts where the recording's ramp has ended: the residual of
 the starting model (recording minus model, unclipped) is searched from one
 ramp before to one ramp after the model's end of the start ramp (or of the
-motion); the last sample beyond :data:`RAMP_SIGMA` white-noise sigmas marks
-the ramp as still running, and the window starts :data:`GUARD_S` after it (or
-after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
+motion), and on for another ramp past each sample found, as long as samples
+are found (a controller's ramp of 0.5 s or 1 s runs far past the model's
+0.15 s one); the last sample beyond :data:`RAMP_SIGMA` white-noise sigmas
+marks the ramp as still running, and the window starts :data:`GUARD_S` after
+it, or :data:`GUARD_FRACTION` of how far it ran past the model's edge if
+longer (or after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
 from 10 sigmas to nothing in 8 ms (the time grows as the ramp's length to the
 power 1.5; a trapezoid or an s-curve stops within a millisecond). Under the
 null no sample crosses the mark. A ringing that does cross it moves its
@@ -28,8 +31,11 @@ import numpy as np
 
 # A residual sample this many white-noise sigmas off marks a feed ramp as still running.
 RAMP_SIGMA = 10.0
-# From the last such sample to the window's start. [s]
+# From the last such sample to the window's start, at least. [s]
 GUARD_S = 0.015
+# ... and this fraction of how far the recording's ramp ran past the model's: a smooth
+# ramp's tail, from the mark down to the noise, lasts longer the longer the ramp.
+GUARD_FRACTION = 0.25
 
 
 def _recording_time(model, state, block, tau):
@@ -50,6 +56,19 @@ def _last_crossing(model, state, block, t_all, xy_all, sigma, lo, hi):
     r = xy_all[i0:i1] - model.samples_at(state, t, block)
     over = np.any(np.abs(r) > RAMP_SIGMA * sigma, axis=1)
     return float(t[over][-1]) if over.any() else -math.inf
+
+
+def _ramp_end(model, state, block, t_all, xy_all, sigma, edge, ramp, lo, hi):
+    """Last crossing of the mark around ``edge``, followed a ramp at a time, or -inf. [s]"""
+    last = -math.inf
+    start, stop = max(edge - ramp, lo), min(edge + ramp, hi)
+    while start < stop:
+        seen = _last_crossing(model, state, block, t_all, xy_all, sigma, start, stop)
+        if seen == -math.inf:
+            break
+        last = seen
+        start, stop = stop, min(seen + ramp, hi)
+    return last
 
 
 def transient_windows(model, state, t_all, xy_all, sigma):
@@ -90,8 +109,7 @@ def transient_windows(model, state, t_all, xy_all, sigma):
             (start + ramp, start, first, False),
             (end, last, later, True),
         ):
-            seen = _last_crossing(
-                model, state, b, t_all, xy_all, sigma, max(edge - ramp, lo), min(edge + ramp, hi)
-            )
-            out.append((b, max(edge, seen) + GUARD_S, hi, after_end))
+            seen = _ramp_end(model, state, b, t_all, xy_all, sigma, edge, ramp, lo, hi)
+            guard = max(GUARD_S, GUARD_FRACTION * (seen - edge))
+            out.append((b, max(edge, seen) + guard, hi, after_end))
     return out

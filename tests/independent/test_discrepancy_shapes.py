@@ -124,10 +124,17 @@ def test_a_friction_flip_slower_than_the_mode_is_a_lost_motion():
     # the friction turns over within v_s / a = 10 ms, longer than the 80 Hz mode's
     # period: the mode follows it quasi-statically and the table deflects by
     # 2 mu / omega_n^2 = 0.16 um along tanh(t / 10 ms), the backlash candidate's shape
-    # (its ringing is 0.6 % of a sudden flip's). No test can call it a vibration.
+    # (its ringing is 0.6 % of a sudden flip's). No test can call it a vibration; at
+    # this size a short reversal spike fits the same deflection nearly as well, and the
+    # honest name is the backlash or "one of" the two.
     mu, velocity = 0.02, 5e-4
-    result, named = _run(_friction_mode(80.0, mu, velocity), sensor=SENSOR_500)
-    assert named == {"backlash"}, named
+    effects = _friction_mode(80.0, mu, velocity)
+    _, named = _run(effects, sensor=SENSOR_500)
+    assert named in ({"backlash"}, {"backlash", "reversal_spikes"}), named
+    # the backlash alone, fitted, has the deflection's size and take-up
+    rec, _ = generate(SHORT, {**ALPHA, **effects}, SENSOR_500, seed=1)
+    result = find_discrepancy(rec, DiscrepancyOptions(suggest=False, effects=("backlash",)))
+    assert result.named_effects == ("backlash",), result.headline()
     fitted = {p.name: p for p in result.model}
     deflection_um = 2 * mu / (2 * math.pi * 80.0) ** 2 * 1e6
     for axis in ("x", "y"):
@@ -154,3 +161,15 @@ def test_a_mode_rung_by_the_feed_ramps_is_named():
     assert values["structural_vibration.start_stop_m_s2"] != 0.0
     # the windows hold about ten periods: 2 % of frequency is a fifth of a period at their end
     assert values["structural_vibration.frequency_hz"] == pytest.approx(41.0, rel=0.02)
+
+
+@pytest.mark.parametrize("ramp_s, shape", [(0.6, "cosine"), (1.0, "constant_accel")])
+def test_a_controllers_long_feed_ramp_leaves_no_gap_at_block_starts(ramp_s, shape):
+    # the model ramps in 0.15 s: a ramp four to seven times longer still runs when the
+    # model's has ended, and the transient windows must start after the recording's ramp
+    motion = {"ramp_s": ramp_s, "ramp_shape": shape}
+    rec, _ = generate(SHORT, dict(ALPHA), SENSOR, seed=4, motion=motion)
+    result = find_discrepancy(rec, DiscrepancyOptions(suggest=False))
+    assert headline_is_honest(result.to_json_dict())
+    assert result.explained, result.headline()
+    assert not result.named_effects
