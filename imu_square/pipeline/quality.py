@@ -217,8 +217,9 @@ def quality_flags(
         if block.lost_end is not None:
             label, (a, b) = block.lost_end
             other = "stop" if label == "start" else "start"
+            what = "clipping" if _spans_holding([(a, b)], clipped) else "a gap"
             warnings.append(
-                f"block {block.plan.index} ({block.direction}): a gap ({a:.2f}-{b:.2f} s) hides "
+                f"block {block.plan.index} ({block.direction}): {what} ({a:.2f}-{b:.2f} s) hides "
                 f"its {label} of motion; anchored by its {other} and the other blocks' length "
                 f"of motion (midpoint u {block.u_t_mid_s * 1e3:.1f} ms)"
             )
