@@ -3,12 +3,14 @@
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from pipeline_synth import synth_circle
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
-from imu_square.program import TestProgram
+from imu_square.program import TestProgram, read_program
+from imu_square.units import G
 
 PROG = TestProgram(cycles_per_direction=3, dwell_s=1.0)
 REALDATA = Path("/work/shared/realdata/Inkering__printnoser__rectangle_1__accel.csv")
@@ -144,3 +146,56 @@ def test_a_bootstrap_of_fewer_than_two_resamples_is_refused(tmp_path, capsys, n)
     assert err.strip().splitlines() == [
         f"imu-square analyze: error: bootstrap_n must be 0 (no bootstrap) or at least 2, got {n}"
     ]
+
+
+def test_one_clipped_sample_after_a_stop_moves_no_time_anchor(tmp_path, capsys):
+    # Four blocks of 4 circles (r 25 mm at 9000 mm/min: 0.955 Hz, v^2/r = 0.9 m/s^2),
+    # eps_c 1 deg, 7 µg/√Hz at 500 Hz, written to CSV and imported with a 2 g range.
+    # One sample at +2 g on x 78 ms after the first CW block stops: low-passed to
+    # 2.6 m/s^2 it stood above the motion threshold (0.45 m/s^2) and moved that
+    # block's detected stop by 0.1 s, eps_c to 4.9 +- 1.5 deg and the floor 3.7 times.
+    toml = tmp_path / "p.toml"
+    toml.write_text(
+        "[program]\nradius_mm = 25.0\nfeed_mm_per_min = 9000.0\ncycles_per_direction = 4\n"
+        "dwell_s = 2.0\nruns = 2\n"
+    )
+    eps_c = np.radians(1.0)
+    rec, truth = synth_circle(
+        read_program(toml), eps_c=eps_c, ramp_s=0.15, density=7e-6 * G, fs=500.0, seed=3
+    )
+    spike = round((truth["blocks"][1]["t1"] + 0.078) * 500.0)
+    docs = {}
+    for name, at in (("clean", []), ("clipped", [spike])):
+        accel = rec.accel.copy()
+        accel[at, 0] = 2 * G
+        csv = tmp_path / f"{name}.csv"
+        np.savetxt(
+            csv,
+            np.column_stack([rec.time_s, accel]),
+            fmt="%.9f",
+            delimiter=",",
+            header="time_s,accel_x,accel_y,accel_z",
+            comments="",
+        )
+        mcap = tmp_path / f"{name}.mcap"
+        argv = ["import", str(csv), "--program", str(toml), "-o", str(mcap), "--range-g", "2"]
+        assert main([*argv, "--start-time", "2026-11-01T02:00:00Z"]) == 0
+        capsys.readouterr()
+        assert main(["analyze", "--json", str(mcap)]) == 0
+        out, err = capsys.readouterr()
+        docs[name] = (json.loads(out), err)
+    doc, err = docs["clipped"]
+    clean = docs["clean"][0]
+    assert doc["quality"]["clipped_samples"] == 1
+    assert (
+        f"1 sample(s) at the sensor's full scale (clipping), at {rec.time_s[spike]:.3f} s: "
+        "left out as lost" in err
+    )
+    # The sample lies in no analysed cycle: all 8 + 8 are kept, eps_c is within its
+    # u (0.07 deg) of the truth, and the residual, so the floor, is the clean run's.
+    assert doc["cycles_used"] == {"ccw": 8, "cw": 8}
+    assert abs(doc["eps_c_deg"] - 1.0) < doc["u_eps_c_deg"]
+    assert doc["crb_urad"] == pytest.approx(clean["crb_urad"], rel=0.02)
+    assert doc["squareness_urad"] == pytest.approx(
+        clean["squareness_urad"], abs=0.1 * doc["u_squareness_urad"]
+    )

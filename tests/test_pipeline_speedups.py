@@ -23,7 +23,6 @@ from imu_square.pipeline import (
     align,
     newton,
     per_cycle,
-    quality,
     segment,
     squareness,
     stage2,
@@ -172,16 +171,6 @@ def test_circle_fits_without_covariance_are_the_same_fits(complete):
     assert np.all(np.isnan(lean.u_theta_x)) and np.all(np.isfinite(full.u_theta_x))
 
 
-def test_clipped_times_with_a_valid_mask_are_those_of_the_valid_samples():
-    rng = np.random.default_rng(2)
-    t = np.arange(5000) * 1e-3
-    raw = rng.normal(0, 10, (5000, 3))
-    valid = rng.random(5000) > 0.1
-    clipped = quality.clipped_times(t, raw, 20.0, valid)
-    np.testing.assert_array_equal(clipped, quality.clipped_times(t[valid], raw[valid], 20.0))
-    assert 0 < clipped.size < np.count_nonzero(np.any(np.abs(raw) >= 0.999 * 20.0, axis=1))
-
-
 @settings(max_examples=50, deadline=None)
 @given(
     arrays(
@@ -190,10 +179,9 @@ def test_clipped_times_with_a_valid_mask_are_those_of_the_valid_samples():
         elements=st.floats(-40, 40, width=32) | st.sampled_from([np.nan, np.inf, -np.inf, 20.0]),
     )
 )
-def test_clipped_times_column_by_column_are_numpys_any(raw):
-    t = np.arange(raw.shape[0]) * 1e-3
-    expected = t[np.any(np.abs(raw) >= 0.999 * 20.0, axis=1)]  # the call it replaces
-    np.testing.assert_array_equal(quality.clipped_times(t, raw, 20.0), expected)
+def test_clipped_samples_column_by_column_are_numpys_any(raw):
+    expected = np.any(np.abs(raw) >= 0.999 * 20.0, axis=1)  # the call it replaces
+    np.testing.assert_array_equal(filter_module.clipped_samples(raw, 20.0), expected)
 
 
 def _periodogram_sum_reference(r, window):

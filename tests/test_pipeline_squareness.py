@@ -12,7 +12,7 @@ from pipeline_synth import synth_circle
 
 from imu_square.errors import AnalysisError
 from imu_square.io.recording import SensorInfo
-from imu_square.pipeline.squareness import AnalysisOptions, analyze
+from imu_square.pipeline.squareness import AnalysisOptions, analyze, filter_and_segment
 from imu_square.pipeline.uncertainty import cramer_rao
 from imu_square.program import TestProgram
 
@@ -131,6 +131,26 @@ def test_clipping_drops_cycles():
     assert res.quality["clipped_samples"] == 1
     assert res.cycles_used["ccw"] == 3
     assert any("clipping" in w for w in res.quality["warnings"])
+
+
+def test_a_clipped_sample_at_a_stop_of_motion_hides_it():
+    # A sample at full scale is no measurement, taken out like a lost one: at the
+    # detected stop of a block it hides that stop, and the start and the other
+    # blocks' length of motion anchor the block (it used to drag the stop along).
+    eps = math.radians(2.1)
+    rec, _ = synth_circle(PROG, alpha=50e-6, eps_c=eps, fs=100.0, density=1e-7)
+    _, seg = filter_and_segment(rec, PROG, None, FAST.order)
+    stop = int(np.searchsorted(rec.time_s, seg.blocks[1].t_stop_s))
+    acc = rec.accel.copy()
+    acc[stop, 0] = 20.0
+    res = analyze(replace(rec, accel=acc, sensor=SensorInfo(range_m_s2=20.0)), FAST)
+    assert abs(res.squareness_rad - 50e-6) < 1e-6
+    assert abs(res.eps_c_rad - eps) < 3 * res.u_eps_c_rad
+    assert res.cycles_used == {"ccw": 4, "cw": 4}
+    assert any(
+        re.search(r"block 1 \(cw\): clipping \(.*\) hides its stop of motion; anchored by", w)
+        for w in res.quality["warnings"]
+    )
 
 
 def test_no_program_is_refused():

@@ -280,7 +280,7 @@ def layout_from_recording(recording, program, options):
         Where the pipeline refuses the recording (no circle, wrong direction, ...).
     """
     data, seg = filter_and_segment(recording, program, options.cutoff_hz, options.order)
-    _, cyc = trace_cycles(recording, data, seg, grid_points=8)
+    cyc = trace_cycles(data, seg, grid_points=8)
     prog = seg.program
     # the recorded samples only: the filter's bridged ones are not data
     t_all = recording.time_s

@@ -22,6 +22,25 @@ from imu_square.io.runlog import parse_detail
 AXES = ("x", "y", "z")
 
 
+def lost_runs(seq):
+    """Where a run of sequence numbers jumps: the samples lost between two kept ones.
+
+    Parameters
+    ----------
+    seq : ndarray of int64, shape (n_samples,)
+        Strictly increasing sequence numbers.
+
+    Returns
+    -------
+    list of tuple (int, int)
+        ``(index, lost)``: samples ``index - 1`` and ``index`` are ``lost + 1``
+        sequence numbers apart.
+    """
+    jumps = np.diff(seq)
+    idx = np.flatnonzero(jumps > 1)
+    return [(int(i) + 1, int(jumps[i]) - 1) for i in idx]
+
+
 @dataclass(frozen=True)
 class Event:
     """Something that happened at one instant of a test.
@@ -181,9 +200,7 @@ class Recording:
             ``(index, lost)``: samples ``index - 1`` and ``index`` are
             ``lost + 1`` sequence numbers apart.
         """
-        jumps = np.diff(self.seq)
-        idx = np.flatnonzero(jumps > 1)
-        return [(int(i) + 1, int(jumps[i]) - 1) for i in idx]
+        return lost_runs(self.seq)
 
     def tail_gaps(self):
         """Samples lost after the last one: a board gone before the recorder stopped.

@@ -88,35 +88,6 @@ def check_period(disagreement, measured_s, program):
         )
 
 
-def clipped_times(t_s, accel, range_m_s2, valid=None):
-    """Times of samples at or beyond the sensor's full scale.
-
-    Parameters
-    ----------
-    t_s : ndarray, shape (n_samples,)
-        Sample times. [s]
-    accel : ndarray, shape (n_samples, 3)
-        Raw acceleration. [m/s^2]
-    range_m_s2 : float
-        Full-scale range; NaN when unknown (then nothing is flagged). [m/s^2]
-    valid : ndarray of bool, shape (n_samples,), optional
-        Samples that are data (not bridged); all if None.
-
-    Returns
-    -------
-    ndarray
-        Times of clipped samples. [s]
-    """
-    if not np.isfinite(range_m_s2):
-        return np.empty(0)
-    limit = 0.999 * range_m_s2
-    # Column by column: np.any(..., axis=1) over 3 columns is 15 times slower.
-    hit = np.abs(accel[:, 0]) >= limit
-    for k in range(1, accel.shape[1]):
-        hit |= np.abs(accel[:, k]) >= limit
-    return t_s[hit if valid is None else hit & valid]
-
-
 def check_cycles(n_ccw, n_cw, program, min_cycles, dropped):
     """Refuse too few usable cycles in either direction.
 
@@ -165,6 +136,25 @@ def outlier_fractions(mean_fit):
         zero = np.concatenate([fit.x.weights[i], fit.y.weights[i]]) == 0.0
         out.append(float(np.mean(zero[held])))
     return out
+
+
+def _clipping_warning(clipped, shown=3):
+    """The line naming the clipped samples by time (the first ``shown`` of them)."""
+    where = ", ".join(f"{t:.3f}" for t in clipped[:shown])
+    more = f" and {clipped.size - shown} more" if clipped.size > shown else ""
+    return (
+        f"{clipped.size} sample(s) at the sensor's full scale (clipping), at {where} s{more}: "
+        f"left out as lost, and any cycle they touch dropped"
+    )
+
+
+def _spans_holding(spans, times):
+    """How many of the sorted ``(start, end)`` spans hold one of the sorted ``times``."""
+    if not len(spans) or not times.size:
+        return 0
+    spans = np.asarray(spans, dtype=np.float64)
+    k = np.minimum(np.searchsorted(times, spans[:, 0], side="right"), times.size - 1)
+    return int(np.count_nonzero((times[k] > spans[:, 0]) & (times[k] < spans[:, 1])))
 
 
 def quality_flags(
@@ -216,8 +206,8 @@ def quality_flags(
     crb = floor.crb_rad
     n_gaps = recording.gap_count
     if clipped.size:
-        warnings.append(f"{clipped.size} samples at the sensor's full scale (clipping)")
-    n_bridged = len(filtered.bridged_spans_s)
+        warnings.append(_clipping_warning(clipped))
+    n_bridged = len(filtered.bridged_spans_s) - _spans_holding(filtered.bridged_spans_s, clipped)
     if n_gaps:
         bridged = (
             f" ({n_bridged} short one(s) bridged, their samples left out)" if n_bridged else ""
@@ -227,8 +217,9 @@ def quality_flags(
         if block.lost_end is not None:
             label, (a, b) = block.lost_end
             other = "stop" if label == "start" else "start"
+            what = "clipping" if _spans_holding([(a, b)], clipped) else "a gap"
             warnings.append(
-                f"block {block.plan.index} ({block.direction}): a gap ({a:.2f}-{b:.2f} s) hides "
+                f"block {block.plan.index} ({block.direction}): {what} ({a:.2f}-{b:.2f} s) hides "
                 f"its {label} of motion; anchored by its {other} and the other blocks' length "
                 f"of motion (midpoint u {block.u_t_mid_s * 1e3:.1f} ms)"
             )

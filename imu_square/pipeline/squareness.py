@@ -88,15 +88,13 @@ def filter_and_segment(recording, program, cutoff_hz, order):
     return data, seg
 
 
-def trace_cycles(recording, data, seg, grid_points):
+def trace_cycles(data, seg, grid_points):
     """The usable whole cycles on the position-angle grid, clipping and gaps left out.
 
     Parameters
     ----------
-    recording : Recording
-        The test as recorded (its sensor's range).
     data : FilteredRecording
-        From :func:`filter_and_segment`.
+        From :func:`filter_and_segment` (its gaps and clipped samples).
     seg : Segmentation
         From :func:`filter_and_segment`.
     grid_points : int
@@ -104,22 +102,18 @@ def trace_cycles(recording, data, seg, grid_points):
 
     Returns
     -------
-    clipped : ndarray
-        Times of clipped samples. [s]
-    cyc : CycleTraces
+    CycleTraces
     """
-    clipped = q.clipped_times(data.t_s, data.raw, recording.sensor.range_m_s2, data.valid)
-    cyc = cycle_traces(
+    return cycle_traces(
         data.t_s,
         data.xy,
         seg,
-        bad_intervals(data.gap_spans_s, clipped),
+        bad_intervals(data.gap_spans_s, data.clipped_s),
         data.margin_s,
         grid_points,
         missing_s=data.bridged_spans_s,
         onset_margin_s=data.onset_margin_s,
     )
-    return clipped, cyc
 
 
 @one_blas_thread()  # many small solves: BLAS threads only cost (imu_square.blas)
@@ -152,7 +146,7 @@ def analyze(recording, options=None, program=None):
     opts = options or AnalysisOptions()
     prog = _program_of(recording, program)
     data, seg = filter_and_segment(recording, prog, opts.cutoff_hz, opts.order)
-    clipped, cyc = trace_cycles(recording, data, seg, opts.grid_points)
+    cyc = trace_cycles(data, seg, opts.grid_points)
     q.check_cycles(cyc.ccw.n, cyc.cw.n, prog, opts.min_cycles, cyc.dropped)
 
     norm, irls = opts.robust_norm(), opts.irls()
@@ -176,7 +170,7 @@ def analyze(recording, options=None, program=None):
         recording,
         seg,
         cyc,
-        clipped,
+        data.clipped_s,
         speed.amplitude_ratio,
         outliers,
         u_sq,
