@@ -14,7 +14,16 @@ from datetime import timedelta
 
 import pytest
 from doc_quotes import quoted_form
-from monitor_rig import ALPHA, MONITOR, NO_DIAGNOSTICS, PROGRAM, SENSOR, START, judge
+from monitor_rig import (
+    ALPHA,
+    MONITOR,
+    NO_DIAGNOSTICS,
+    PROGRAM,
+    SENSOR,
+    START,
+    copy_base,
+    judge,
+)
 
 from imu_square.cli import main
 from imu_square.io.mcap import write_mcap
@@ -402,3 +411,154 @@ def test_a_diagnostic_whose_nights_scatter_is_designed_on_student_s_t():
     assert p_t < 3 * p_normal < p_wrong / 10
     for t_chart, n_chart in zip(t_design.charts, normal.charts, strict=True):
         assert t_chart.limit > n_chart.limit
+
+
+BACKLASH_ONLY = '\n[diagnostics]\neffects = ["backlash"]\n' + ALARMED
+NO_VALUE = "the diagnostic fit failed: removed for the test"
+
+
+@pytest.fixture(scope="module")
+def unfitted(tmp_path_factory):
+    """Two monitor folders of one machine with the backlash fitted, ``(first, second)``.
+
+    first: a 3-night baseline fitted with our own trajectory's motion, then a night
+    whose backlash_x the fit gave no value for. second: its copy, then a new
+    baseline of 3 nights stored without diagnostics, as an older history's, and a
+    night after it also without.
+    """
+    import sqlite3
+
+    first = tmp_path_factory.mktemp("unfitted-first")
+    config = _folder(first, BACKLASH_ONLY)
+    runs = [str(backlash_night(first, d)) for d in range(3)]
+    assert main(["baseline", "set", "--config", str(config), *runs]) == 0
+    assert judge(config, backlash_night(first, 3))[1]["run_id"] == 4
+    with sqlite3.connect(first / "history.db") as db:
+        db.execute(
+            "UPDATE diagnostics SET value = NULL, u_value = NULL, missing_reason = ? WHERE "
+            "name = 'backlash_x' AND fit_id = (SELECT id FROM diagnostic_fits WHERE run_id = 4)",
+            (NO_VALUE,),
+        )
+    db.close()
+    second = tmp_path_factory.mktemp("unfitted-second")
+    copy_base(first, second)
+    bare = second / "bare.toml"  # the same machine and history, no diagnostics
+    bare.write_text(MONITOR.format(program=second / "program.toml"))
+    runs = [str(backlash_night(second, d)) for d in (10, 11, 12)]
+    assert main(["baseline", "set", "--config", str(bare), *runs]) == 0
+    assert judge(bare, backlash_night(second, 13))[1]["run_id"] == 8
+    return first, second
+
+
+def _alarm_cell(report, name):
+    """The alarm cell of a diagnostic's row in the report's diagnostics table, as text."""
+    import html
+    import re
+
+    section = report.split('<section id="diagnostics">')[1].split("</section>")[0]
+    row = re.search(rf"<tr><td class='text'>{name}</td>(.*?)</tr>", section).group(1)
+    return html.unescape(re.findall(r"<td[^>]*>(.*?)</td>", row)[-1])
+
+
+def test_a_diagnostic_without_a_baseline_under_another_motion_says_why(unfitted, capsys):
+    # The baseline's nights were fitted with our own trajectory's motion; judged with
+    # LinuxCNC's (nightly --motion linuxcnc), no diagnostic has a baseline, and the
+    # report and history say why next to the alarm's state, which is not "off".
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.night import judge_history
+    from imu_square.monitor.report.html import render_report
+
+    folder = unfitted[0]
+    config = read_monitor(folder / "monitor.toml")
+    with open_history(folder / "history.db") as h:
+        trajectory = judge_history(config, h)
+        linuxcnc = judge_history(config.with_motion("linuxcnc"), h)
+    why = (
+        "no baseline: 0 of the baseline's 3 nights have a diagnostic fit under these "
+        "settings with the motion 'linuxcnc'"
+    )
+    assert [t.baseline for t in linuxcnc.diagnostics] == [None, None]
+    assert all(t.note.startswith(why) for t in linuxcnc.diagnostics)
+    report = render_report(linuxcnc)
+    # backlash_x's alarm was asked for: not judged, and why; backlash_y's was not: off
+    assert _alarm_cell(report, "backlash_x") == f"not judged; {linuxcnc.diagnostics[0].note}"
+    assert _alarm_cell(report, "backlash_y") == f"off; {linuxcnc.diagnostics[1].note}"
+    # with the motion the baseline ran, backlash_x is judged and has no note
+    assert all(t.baseline is not None and t.note == "" for t in trajectory.diagnostics)
+    assert _alarm_cell(render_report(trajectory), "backlash_y") == "off"
+    # history, the monitor file's motion LinuxCNC's: every night and the baseline unfitted
+    lc = folder / "linuxcnc.toml"
+    lc.write_text(
+        (folder / "monitor.toml")
+        .read_text()
+        .replace("[program]\n", '[program]\nmotion = "linuxcnc"\n')
+    )
+    capsys.readouterr()
+    assert main(["history", "--config", str(lc)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert (
+        "4 judged night(s) have no diagnostic fit under these settings with the motion "
+        "'linuxcnc' (runs 1, 2, 3, 4): replay their recordings ('imu-square replay') with them"
+    ) in out
+    assert f"every diagnostic: {linuxcnc.diagnostics[0].note}" in out
+
+
+def test_nights_without_a_value_or_a_fit_are_marked_on_the_charts_bottom_edge(unfitted):
+    # backlash_x has no value on run 4; runs 5 to 8 (the current baseline's nights and
+    # the night after) have no fit. Each is an x on the backlash panel's bottom edge,
+    # never on a value.
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import numpy as np
+    from matplotlib import pyplot as plt
+
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.history.encoding import datetime_from_ns
+    from imu_square.monitor.night import judge_history
+    from imu_square.monitor.report.diagnostics_figure import plot_diagnostics
+
+    folder = unfitted[1]
+    with open_history(folder / "history.db") as h:
+        assessment = judge_history(read_monitor(folder / "monitor.toml"), h)
+    when = {n.run.id: datetime_from_ns(n.run.recorded_at_ns) for n in assessment.nights}
+    drawn = {}
+
+    def savefig(fig, *args, **kwargs):
+        fig.canvas.draw()  # the limits as they are in the file
+        (ax,) = fig.axes
+        for line in ax.lines:
+            if line.get_marker() == "x":
+                xy = line.get_transform().transform(
+                    np.column_stack([ax.convert_xunits(line.get_xdata()), line.get_ydata()])
+                )
+                drawn[line.get_label()] = (list(line.get_xdata()), xy[:, 1], ax.bbox.y0)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plt.Figure, "savefig", savefig)
+        plot_diagnostics(assessment, folder / "diagnostics.png")
+    assert drawn  # every x on the bottom edge, whatever the limits became
+    for _, y, bottom in drawn.values():
+        np.testing.assert_allclose(y, bottom, atol=1e-6)  # display pixels
+    assert set(drawn) == {"backlash_x: no value", "backlash_y: no value"}
+    for name, runs in (("backlash_x", [4, 5, 6, 7, 8]), ("backlash_y", [5, 6, 7, 8])):
+        assert drawn[f"{name}: no value"][0] == [when[i] for i in runs]
+
+
+def test_history_says_which_nights_have_no_diagnostic_fit(unfitted, capsys):
+    # the current baseline's nights have no fit (an older history): said in one line,
+    # and why no diagnostic has a baseline
+    folder = unfitted[1]
+    capsys.readouterr()
+    assert main(["history", "--config", str(folder / "monitor.toml")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert (
+        "4 judged night(s) have no diagnostic fit under these settings with the motion "
+        "'trajectory' (runs 5, 6, 7, 8): replay their recordings ('imu-square replay') with them"
+    ) in out
+    assert (
+        "every diagnostic: no baseline: 0 of the baseline's 3 nights have a diagnostic fit "
+        "under these settings with the motion 'trajectory' (a fit is kept under the settings "
+        "and motion it ran with): replay their recordings ('imu-square replay') with them, or "
+        "set a new baseline"
+    ) in out

@@ -102,9 +102,10 @@ def run(args):
             )
             if args.json:
                 print(json.dumps(night_record(assessment, n, verdict(assessment, n))))
-        from imu_square.monitor.diagnostics.text import table_lines
+        from imu_square.monitor.diagnostics.text import note_lines, table_lines
 
         lines = table_lines(assessment.diagnostics, [n.run for n in nights])
+        lines += note_lines(assessment.diagnostics, nights, config.motion)
         if lines:
             print("\ndiagnostics", file=result_stream(args))
         for line in lines:

@@ -60,3 +60,45 @@ def table_lines(trends, runs):
     if standing:
         lines.append(f"diagnostic alarms standing: {', '.join(standing)}")
     return lines
+
+
+def note_lines(trends, nights, motion):
+    """Why some diagnostics have no value or no baseline, one line each.
+
+    Parameters
+    ----------
+    trends : sequence of DiagnosticTrend
+        The machine's diagnostics.
+    nights : sequence of Night
+        The nights shown, in order.
+    motion : str
+        The commanded motion the diagnostics' fits are read under.
+
+    Returns
+    -------
+    list of str
+        A line for the judged nights (not ``invalid``) shown that have no
+        diagnostic fit under these settings, naming their runs; then each
+        distinct note of the diagnostics (:attr:`DiagnosticTrend.note`) with
+        the diagnostics it holds for. Empty without diagnostics or notes.
+    """
+    if not trends:
+        return []
+    fitted = {n.run.id for t in trends for n in t.nights}
+    unfitted = [n.run.id for n in nights if n.state != "invalid" and n.run.id not in fitted]
+    lines = []
+    if unfitted:
+        ids = ", ".join(map(str, unfitted[:6])) + (", …" if len(unfitted) > 6 else "")
+        lines.append(
+            f"{len(unfitted)} judged night(s) have no diagnostic fit under these settings with "
+            f"the motion {motion!r} (runs {ids}): replay their recordings ('imu-square replay') "
+            "with them"
+        )
+    by_note = {}
+    for t in trends:
+        if t.note:
+            by_note.setdefault(t.note, []).append(t.diagnostic.name)
+    for note, names in by_note.items():
+        who = "every diagnostic" if len(names) == len(trends) else ", ".join(names)
+        lines.append(f"{who}: {note}")
+    return lines

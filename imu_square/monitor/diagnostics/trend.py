@@ -123,7 +123,7 @@ def judge_diagnostics(history, runs, baseline_row, settings, alarms):
     fits = history.diagnostic_fits(runs[0].machine_id, settings.key())
     valid = [r for r in runs if r.valid and r.id in fits]
     return tuple(
-        _trend(history, d, valid, fits, baseline_row, settings.alarm_steps.get(d.name), alarms)
+        _trend(history, d, valid, fits, baseline_row, settings, alarms)
         for d in settings.diagnostics()
     )
 
@@ -137,7 +137,8 @@ def _night(run, fit, name):
     return DiagnosticNight(run, row.value, row.u_value)
 
 
-def _trend(history, diagnostic, runs, fits, baseline_row, step_si, alarms):
+def _trend(history, diagnostic, runs, fits, baseline_row, settings, alarms):
+    step_si = settings.alarm_steps.get(diagnostic.name)
     nights = [_night(r, fits[r.id], diagnostic.name) for r in runs]
     if baseline_row is None:
         return DiagnosticTrend(diagnostic, tuple(nights), step=step_si)
@@ -145,10 +146,7 @@ def _trend(history, diagnostic, runs, fits, baseline_row, step_si, alarms):
     base_nights = [n for n in nights if n.run.id in in_baseline and n.missing_reason == ""]
     baseline = diagnostic_baseline([n.value for n in base_nights], [n.u_value for n in base_nights])
     if baseline is None:
-        note = (
-            f"fewer than {MIN_NIGHTS} of the baseline's nights have a value: replay their "
-            f"recordings ('imu-square replay') or set a new baseline"
-        )
+        note = _no_baseline_note(nights, in_baseline, settings.motion)
         return DiagnosticTrend(diagnostic, tuple(nights), step=step_si, note=note)
     design, note = None, ""
     if step_si is not None:
@@ -190,6 +188,26 @@ def _trend(history, diagnostic, runs, fits, baseline_row, step_si, alarms):
             nights[i] = replace(nights[i], chart=point, state=state)
     return DiagnosticTrend(
         diagnostic, tuple(nights), baseline, design, step_si, note, alarm_since_ns=alarm_since
+    )
+
+
+def _no_baseline_note(nights, in_baseline, motion):
+    """Why a diagnostic has no baseline: its baseline's nights without a fit, or without a value.
+
+    A fit is kept under the commanded motion its model ran, so the baseline's
+    nights fitted under another motion have none under this one.
+    """
+    fitted = sum(n.run.id in in_baseline for n in nights)
+    if fitted < MIN_NIGHTS:
+        return (
+            f"no baseline: {fitted} of the baseline's {len(in_baseline)} nights have a "
+            f"diagnostic fit under these settings with the motion {motion!r} (a fit is kept "
+            f"under the settings and motion it ran with): replay their recordings "
+            f"('imu-square replay') with them, or set a new baseline"
+        )
+    return (
+        f"no baseline: fewer than {MIN_NIGHTS} of the baseline's nights have a value: replay "
+        f"their recordings ('imu-square replay') or set a new baseline"
     )
 
 

@@ -1,14 +1,16 @@
 """The diagnostics' trend chart: one panel per effect, every night's value with its uncertainty.
 
 Each panel shows an effect's diagnostics (X and Y together) in their own
-unit: every valid night's value with its standard uncertainty and the nights
-whose fit gave no value. Every baseline's period is drawn against that
-baseline, as the squareness's trend chart draws it (:mod:`.figures`): where
-its runs were and where they begin, the diagnostic's baseline value with its
-band (``±u`` of the baseline), the alarm limits of a diagnostic that has an
-alarm (its baseline ``± L u`` of each night, ``L`` the Shewhart limit), and
-the nights its charts were past their warning or alarm limits; so an alarm
-that fired before the current baseline stays in view.
+unit: every valid night's value with its standard uncertainty and, as an x
+on the panel's bottom edge, the judged nights it has no value for (its fit
+gave none, or the night has no fit under these settings). Every baseline's
+period is drawn against that baseline, as the squareness's trend chart draws
+it (:mod:`.figures`): where its runs were and where they begin, the
+diagnostic's baseline value with its band (``±u`` of the baseline), the alarm
+limits of a diagnostic that has an alarm (its baseline ``± L u`` of each
+night, ``L`` the Shewhart limit), and the nights its charts were past their
+warning or alarm limits; so an alarm that fired before the current baseline
+stays in view.
 """
 
 import math
@@ -60,6 +62,7 @@ def plot_diagnostics(assessment, path, title=""):
             mark_baseline((ax,), period.baseline_row, labelled)
         for d, colour in zip(diagnostics, _COLOURS, strict=False):
             _draw(ax, _period_trends(assessment, d.name), colour, labelled)
+            _draw_missing(ax, assessment, d.name, colour, labelled)
         ax.set_title(effect.replace("_", " "), fontsize=9, loc="left")
         ax.set_ylabel(f"[{diagnostics[0].unit}]")
         ax.grid(alpha=0.3)
@@ -109,10 +112,37 @@ def _draw(ax, period_trends, colour, labelled):
         )
     for period, trend in period_trends:
         _draw_period(ax, period, trend, colour, labelled)
-    missing = [n for n in nights if not math.isfinite(n.value)]
+
+
+def _draw_missing(ax, assessment, name, colour, labelled):
+    """An x on the panel's bottom edge for each judged night a diagnostic has no value for:
+    missing from its fit, or not fitted under these settings (a night the verdict
+    does not judge charts no diagnostic, :func:`~imu_square.monitor.night.judge_history`).
+
+    The x sits in axes coordinates (a blended transform: the night's time, the
+    panel's bottom), so it never lands on a value whatever the limits become.
+    """
+    valued = {
+        n.run.id
+        for _, trend in _period_trends(assessment, name)
+        for n in trend.nights
+        if math.isfinite(n.value)
+    }
+    missing = [
+        n
+        for n in assessment.nights
+        if n.state != "invalid" and n.run.recorded_at_ns is not None and n.run.id not in valued
+    ]
     if missing:
-        low = ax.get_ylim()[0]
-        ax.plot([_when(n) for n in missing], [low] * len(missing), "x", color="grey")
+        ax.plot(
+            [_when(n) for n in missing],
+            [0.0] * len(missing),
+            "x",
+            color=colour,
+            transform=ax.get_xaxis_transform(),
+            clip_on=False,
+            label=once(labelled, f"{name}: no value"),
+        )
 
 
 def _draw_period(ax, period, trend, colour, labelled):

@@ -161,11 +161,16 @@ def _diagnostics_html(assessment):
             value = f"{value_text(n.value / d.scale, n.u_value / d.scale)} {d.unit}"
             if math.isfinite(n.change):
                 change = f"{value_text(n.change / d.scale, n.u_change / d.scale)} {d.unit}"
-        alarm = (n.state if n is not None else "") if t.design is not None else "off"
+        alarm = "off" if t.step is None else "not judged"  # asked, but no design
+        if t.design is not None:
+            alarm = n.state if n is not None else ""
+        # the note says why there is no baseline or alarm, whatever the alarm's state
+        said = "; ".join(x for x in (alarm, t.note) if x)
+        css = alarm if alarm in ("ok", "warning", "alarm") else ""
         rows.append(
             f"<tr><td class='text'>{_e(d.name)}</td><td class='text'>{_e(d.meaning)}</td>"
             f"<td>{_e(value)}</td><td>{_e(change)}</td>"
-            f"<td class='text {_e(alarm)}'>{_e(alarm or t.note)}</td></tr>"
+            f"<td class='text {css}'>{_e(said)}</td></tr>"
         )
     when = iso(last.run.recorded_at_ns) if last is not None else "–"
     designs = "".join(f"<li>{_e(t.describe_alarm())}</li>" for t in trends if t.design)
