@@ -11,6 +11,35 @@ import subprocess
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
+def command(profile, *options):
+    """Chromium's command line, headless, with a throw-away profile and options.
+
+    Parameters
+    ----------
+    profile : Path
+        A throw-away Chromium profile folder.
+    *options : str
+        More Chromium options (``--window-size=W,H``).
+
+    Returns
+    -------
+    list of str
+    """
+    return [
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        f"--user-data-dir={profile}",
+        *options,
+        "--virtual-time-budget=10000",
+    ]
+
+
 def body_marks(page, profile, *options):
     """Open a page headless and return its body's ``data-*`` marks and its DOM.
 
@@ -29,21 +58,7 @@ def body_marks(page, profile, *options):
     dom : str
     """
     proc = subprocess.run(
-        [
-            CHROMIUM,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            f"--user-data-dir={profile}",
-            *options,
-            "--virtual-time-budget=10000",
-            "--dump-dom",
-            page.as_uri(),
-        ],
+        [*command(profile, *options), "--dump-dom", page.as_uri()],
         capture_output=True,
         text=True,
         timeout=120,

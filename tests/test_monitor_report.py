@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from headless_chromium import CHROMIUM, body_marks
+from headless_chromium import CHROMIUM, body_marks, command
 from monitor_rig import ALPHA, judge, make_base, night
 
 from imu_square.cli import main
@@ -103,30 +103,17 @@ def test_the_report_has_no_horizontal_overflow_on_a_screen_or_a_phone(machine, t
         pytest.skip("no chromium to open the report (Debian package chromium; .ci/run installs it)")
     probed = tmp_path / "probed.html"
     probed.write_text(out.read_text(encoding="utf-8").replace("</body>", WIDTH_PROBE))
-    browser = [
-        CHROMIUM,
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--no-first-run",
-        f"--user-data-dir={tmp_path / 'profile'}",
-        f"--window-size={width},2000",
-        "--virtual-time-budget=10000",
-    ]
-    proc = subprocess.run(
-        [*browser, "--dump-dom", probed.as_uri()], capture_output=True, text=True, timeout=120
-    )
-    body = re.search(r"<body([^>]*)>", proc.stdout)
-    assert body, proc.stderr[-2000:]
-    marks = dict(re.findall(r'data-([a-z-]+)="([^"]*)"', body.group(1)))
+    window = f"--window-size={width},2000"
+    marks, _ = body_marks(probed, tmp_path / "profile", window)
     assert int(marks["client-width"]) > 0.9 * width - 20, marks  # the window asked for
     assert int(marks["scroll-width"]) <= int(marks["client-width"]), marks
     # A picture to look at when this fails.
     subprocess.run(
-        [*browser, f"--screenshot={tmp_path / 'report.png'}", out.as_uri()],
+        [
+            *command(tmp_path / "profile", window),
+            f"--screenshot={tmp_path / 'report.png'}",
+            out.as_uri(),
+        ],
         capture_output=True,
         timeout=120,
     )
