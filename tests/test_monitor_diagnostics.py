@@ -168,6 +168,48 @@ def test_history_its_charts_and_the_report_show_each_diagnostic(grown, capsys):
 
 
 @pytest.mark.slow
+def test_a_diagnostic_alarm_stands_when_the_commanded_motion_changes(grown, capsys):
+    # backlash_x's alarm fired on fits with our own trajectory's motion; with LinuxCNC's
+    # (nightly --motion linuxcnc) no diagnostic has a baseline, but the machine's backlash
+    # has not shrunk: the alarm stands until a new baseline is set, and says on what
+    from imu_square.monitor.config import read_monitor
+    from imu_square.monitor.night import judge_history
+    from imu_square.monitor.report.html import render_report
+    from imu_square.monitor.verdict import iso
+
+    folder, _, _ = grown
+    config = read_monitor(folder / "monitor.toml")
+    with open_history(folder / "history.db") as h:
+        trajectory = judge_history(config, h)
+        linuxcnc = judge_history(config.with_motion("linuxcnc"), h)
+    fired = {t.diagnostic.name: t.alarm_since_ns for t in trajectory.diagnostics}
+    assert fired["backlash_x"] is not None
+    since = iso(fired["backlash_x"])[:10]
+    standing = {t.diagnostic.name: t for t in linuxcnc.diagnostics}
+    x = standing["backlash_x"]
+    assert x.baseline is None and x.alarm_since_ns == fired["backlash_x"]
+    assert x.note.endswith(
+        f"; its alarm on the fits with the motion 'trajectory' stands since {since}, until a "
+        "new baseline is set"
+    )
+    # the other diagnostics had no alarm: no baseline, and nothing stands
+    assert all(t.alarm_since_ns is None for n, t in standing.items() if n != "backlash_x")
+    assert "stands since" not in standing["backlash_y"].note
+    assert _alarm_cell(render_report(linuxcnc), "backlash_x") == f"not judged; {x.note}"
+    # history under LinuxCNC's motion lists it with the alarms standing
+    lc = folder / "linuxcnc.toml"
+    lc.write_text(
+        (folder / "monitor.toml")
+        .read_text()
+        .replace("[program]\n", '[program]\nmotion = "linuxcnc"\n')
+    )
+    capsys.readouterr()
+    assert main(["history", "--config", str(lc)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert f"diagnostic alarms standing: backlash_x since {since}" in out
+
+
+@pytest.mark.slow
 def test_the_diagnostics_chart_keeps_an_earlier_baselines_limits_and_alarm(grown, tmp_path, capsys):
     # After the backlash's alarm a new baseline is set from nights at 6 µm. The chart
     # draws each baseline's period against its own: both periods' limits at their own

@@ -8,7 +8,10 @@ with an alarm, the designed charts' state (:mod:`.alarms`). The charts run
 over every night since the baseline that has a value, in recording-time
 order, whatever the squareness's state that night (a backlash does not
 depend on the sensor's thermal state or mounting). An alarm stands until a
-new baseline is set, as the squareness's does.
+new baseline is set, as the squareness's does: also when the program's
+commanded motion changes, so that the fits it was found on are kept under
+another key (the diagnostic, with no baseline under the new motion, carries
+the old motion's standing alarm and says so).
 """
 
 import math
@@ -18,6 +21,7 @@ from imu_square.errors import MonitorError
 from imu_square.log import logger
 from imu_square.monitor.diagnostics.alarms import describe, design_inputs, stored_design
 from imu_square.monitor.diagnostics.baseline import MIN_NIGHTS, diagnostic_baseline
+from imu_square.simulate.sources import MOTION_SOURCES
 from imu_square.units import URAD
 
 NO_FIT = "no diagnostic fit under the monitor file's [diagnostics]"
@@ -120,12 +124,39 @@ def judge_diagnostics(history, runs, baseline_row, settings, alarms):
     """
     if not settings.enabled or not runs:
         return ()
+    trends = _trends(history, runs, baseline_row, settings, alarms)
+    if baseline_row is None or all(t.baseline is not None for t in trends):
+        return trends
+    for motion in MOTION_SOURCES:
+        if motion != settings.motion:
+            other = _trends(history, runs, baseline_row, replace(settings, motion=motion), alarms)
+            trends = tuple(_standing(t, o, motion) for t, o in zip(trends, other, strict=True))
+    return trends
+
+
+def _trends(history, runs, baseline_row, settings, alarms):
     fits = history.diagnostic_fits(runs[0].machine_id, settings.key())
     valid = [r for r in runs if r.valid and r.id in fits]
     return tuple(
         _trend(history, d, valid, fits, baseline_row, settings, alarms)
         for d in settings.diagnostics()
     )
+
+
+def _standing(trend, other, motion):
+    """A diagnostic with no baseline, with the alarm standing on its fits under another motion."""
+    from imu_square.monitor.verdict import iso
+
+    if trend.baseline is not None or other.alarm_since_ns is None:
+        return trend
+    if trend.alarm_since_ns is not None and trend.alarm_since_ns <= other.alarm_since_ns:
+        return trend
+    since = iso(other.alarm_since_ns)[:10]
+    note = (
+        f"{trend.note}; its alarm on the fits with the motion {motion!r} stands since {since}, "
+        "until a new baseline is set"
+    )
+    return replace(trend, note=note, alarm_since_ns=other.alarm_since_ns)
 
 
 def _night(run, fit, name):
