@@ -14,23 +14,29 @@ the starting model (recording minus model, unclipped) is searched from one
 ramp before to one ramp after the model's end of the start ramp (or of the
 motion), and on for another ramp past each sample found, as long as samples
 are found (a controller's ramp of 0.5 s or 1 s runs far past the model's
-0.15 s one); the last sample beyond :data:`RAMP_SIGMA` white-noise sigmas
-marks the ramp as still running, and the window starts :data:`GUARD_S` after
-it, or :data:`GUARD_FRACTION` of how far it ran past the model's edge if
-longer (or after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
+0.15 s one). A run of samples of one sign beyond :data:`RAMP_SIGMA`
+white-noise sigmas, lasting :data:`RUN_S` or longer, marks the ramp as still
+running, and the window starts :data:`GUARD_S` after the last such run, or
+:data:`GUARD_FRACTION` of how far it ran past the model's edge if longer (or
+after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
 from 10 sigmas to nothing in 8 ms (the time grows as the ramp's length to the
 power 1.5; a trapezoid or an s-curve stops within a millisecond). Under the
-null no sample crosses the mark. A ringing that does cross it moves its
-window later, which costs signal but never a false alarm: the mark is high
-so that a ringing of a few times the noise does not.
+null no sample crosses the mark. A ringing above 50 Hz crosses it in runs of
+half its period, and so does not move its own window past itself (at 80 Hz
+and a few hundred sigmas it did, by 20 ms). A slower ringing that crosses the
+mark still moves its window later, which costs signal but never a false
+alarm: the mark is high so that a ringing of a few times the noise does not.
 """
 
 import math
 
 import numpy as np
 
-# A residual sample this many white-noise sigmas off marks a feed ramp as still running.
+# A residual sample this many white-noise sigmas off marks a feed ramp as still running,
 RAMP_SIGMA = 10.0
+# ... in a run of samples of one sign past the mark lasting this long: a ramp's residual
+# is smooth over tens of milliseconds, a ringing above 50 Hz flips sooner. [s]
+RUN_S = 0.010
 # From the last such sample to the window's start, at least. [s]
 GUARD_S = 0.015
 # ... and this fraction of how far the recording's ramp ran past the model's: a smooth
@@ -54,8 +60,15 @@ def _last_crossing(model, state, block, t_all, xy_all, sigma, lo, hi):
         return -math.inf
     t = t_all[i0:i1]
     r = xy_all[i0:i1] - model.samples_at(state, t, block)
-    over = np.any(np.abs(r) > RAMP_SIGMA * sigma, axis=1)
-    return float(t[over][-1]) if over.any() else -math.inf
+    last = -math.inf
+    for k in range(2):
+        side = np.sign(r[:, k]) * (np.abs(r[:, k]) > RAMP_SIGMA * sigma[k])
+        # runs of one sign past the mark; a ramp's last longer than a ringing's half period
+        edges = np.flatnonzero(np.diff(side)) + 1
+        for a, b in zip(np.r_[0, edges], np.r_[edges, side.size], strict=True):
+            if side[a] and t[b - 1] - t[a] >= RUN_S:
+                last = max(last, float(t[b - 1]))
+    return last
 
 
 def _ramp_end(model, state, block, t_all, xy_all, sigma, edge, ramp, lo, hi):

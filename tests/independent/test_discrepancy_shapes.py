@@ -173,3 +173,34 @@ def test_a_controllers_long_feed_ramp_leaves_no_gap_at_block_starts(ramp_s, shap
     assert headline_is_honest(result.to_json_dict())
     assert result.explained, result.headline()
     assert not result.named_effects
+
+
+@pytest.mark.parametrize("participation", [5.0, 10.0])
+def test_a_strong_ringing_does_not_move_its_own_transient_window(participation):
+    # An 80 Hz mode rung by the feed ramps, up to a few hundred sigmas per sample: it crosses
+    # the ramp's mark, but in runs of one sign a half period (6 ms) long, shorter than any
+    # ramp's (RUN_S). Its windows never open later than on the same recording without it (it
+    # pushed them 20 ms on, past most of itself, when any sample past the mark counted); they
+    # may open earlier by at most a run and a half period, where the ringing cuts the ramp's
+    # last run short.
+    import numpy as np
+
+    from imu_square.discrepancy.transients import RUN_S
+    from imu_square.discrepancy.workflow import fit_base
+
+    mode = {"freq_hz": 80.0, "zeta": 0.05, "participation": participation}
+    starts = []
+    for effects in ({}, {"mode_x": mode, "mode_y": dict(mode)}):
+        rec, _ = generate(SHORT, {**ALPHA, **effects}, SENSOR_500, seed=3)
+        problem, _, _ = fit_base(rec, SHORT)
+        layout = problem.model.layout
+        index = layout.index[layout.n_analysed :]
+        starts.append(index[np.r_[0, np.flatnonzero(np.diff(index) != 1) + 1]])
+    clean, rung = starts
+    assert rung.size == clean.size == 2 * SHORT.n_blocks  # after each start and each end
+    lead = (clean - rung) / SENSOR_500["rate_hz"]  # [s]
+    assert (lead >= 0).all() and (lead <= RUN_S + 0.5 / 80.0 + 1e-9).all(), lead
+    # and the mode is named (its frequency, at one scan step from a grid point, is not
+    # always found: 69 or 83 Hz on some seeds, with a gap left in the headline)
+    result, named = _run({"mode_x": mode, "mode_y": dict(mode)}, seed=3, sensor=SENSOR_500)
+    assert "structural_vibration" in named, result.headline()
