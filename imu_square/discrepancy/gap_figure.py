@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from imu_square.discrepancy.transients import GUARD_S
 from imu_square.discrepancy.views import VIEWS
 
 
@@ -119,7 +120,11 @@ def _transient_panel(ax, curves, window, name, gap):
         )
     ax.set_xlabel(f"time into the window {name} [ms]")
     ax.set_ylabel("mean residual [mm/s²]")
-    ax.set_title(f"transients {name}", fontsize="medium")
+    ax.set_title(
+        f"transients {name}\n(each window opens {GUARD_S * 1e3:.0f} ms or more after the "
+        "recording's ramp)",
+        fontsize="medium",
+    )
     if ax.lines[1:]:
         ax.legend(fontsize="x-small", ncols=2)
 

@@ -192,7 +192,7 @@ def _transient_curves(space, residual):
     (mean 1 under the null at every ``f``); the mean over the groups and axes
     that hold samples is returned. The bin means sample the residual every
     bin, so frequencies above the bins' Nyquist frequency alias below it, and
-    a sinusoid at ``f`` is scaled by ``sinc(f * bin)`` (0.76 at 0.4 of the bin rate).
+    a sinusoid at ``f`` is scaled by about ``sinc(f * bin)`` (0.76 at 0.4 of the bin rate).
     """
     layout = space.layout
     n = layout.n_transient_bins
