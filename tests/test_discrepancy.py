@@ -16,6 +16,7 @@ from scipy import stats
 
 from imu_square.cli import main
 from imu_square.discrepancy import VIEWS, DiscrepancyOptions, find_discrepancy
+from imu_square.discrepancy.localise import TRANSIENT_ZERO_PAD, residual_curves
 from imu_square.discrepancy.result import headline_is_honest
 from imu_square.discrepancy.workflow import fit_base
 from imu_square.io.mcap import read_mcap, write_mcap
@@ -102,6 +103,19 @@ def test_clean_recording_names_nothing_and_exits_0(tmp_path, capsys):
     assert set(doc["base_gap"]) == set(VIEWS) == set(doc["final_gap"])
     assert all(g < 1.3 for g in doc["final_gap"].values())
     assert "explains the recording down to the noise" in err
+
+
+def test_transient_periodogram_is_one_on_average_under_the_null():
+    recording, _ = simulate_run(PROGRAM, MachineModel(), SENSOR, seed=4)
+    problem, base, _ = fit_base(recording, PROGRAM)
+    curves = residual_curves(problem.space, base.residual)
+    # independent frequencies, one resolution apart, without 0 and the bins' Nyquist frequency
+    power = curves.transient_power[TRANSIENT_ZERO_PAD:-1:TRANSIENT_ZERO_PAD]
+    channels = len([y for y in curves.transient.values() if not np.all(np.isnan(y))])
+    assert channels == 8
+    # each frequency's power is a mean of 8 chi2(2) / 2: sd 1 / sqrt(8) per frequency
+    sd = 1.0 / math.sqrt(channels * power.size)
+    assert abs(power.mean() - 1.0) < 4 * sd, power.mean()
 
 
 # 5 ms at 1 rad/s is 5 mrad of phase against this test's noise floor of about 0.3 mrad

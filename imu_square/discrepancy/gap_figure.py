@@ -1,9 +1,12 @@
 """The gap of every view, step by step, and where the gap left lies.
 
-Four panels: each view's gap after each step (1.0 = noise floor); the final
+Six panels: each view's gap after each step (1.0 = noise floor); the final
 residual's cycle-averaged trace against the position angle (axis reversals
-marked); the mean residual against the time since each axis reversal; and the
-excess of each harmonic over the noise against frequency. The headline is the
+marked); the mean residual against the time since each axis reversal; the
+excess of each harmonic over the noise against frequency, with the transient
+windows' periodogram; and the mean residual against the time into the
+transient windows after the start ramps and after the ends of motion. Where a
+gap left lies is marked in red: angle, time, band. The headline is the
 figure's title, so the figure says whether a gap is left.
 """
 
@@ -15,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from imu_square.discrepancy.transients import GUARD_S
 from imu_square.discrepancy.views import VIEWS
 
 
@@ -64,7 +68,17 @@ def _residual_panels(axes, curves, left):
     f = curves.frequency_hz
     null = np.where(np.arange(f.size) == 0, 1.0, 2.0) * curves.n_blocks
     for a, axis in enumerate(("x", "y")):
-        ax.semilogy(f[1:], np.maximum(curves.excess[a, 1:] / null[1:], 1e-2), lw=0.9, label=axis)
+        y = np.maximum(curves.excess[a, 1:] / null[1:], 1e-2)
+        ax.semilogy(f[1:], y, lw=0.7, alpha=0.6, label=f"circle harmonics, {axis}")
+    ft = curves.transient_frequency_hz
+    if np.any(curves.transient_power > 0):
+        ax.semilogy(
+            ft[1:],
+            np.maximum(curves.transient_power[1:], 1e-2),
+            color="k",
+            lw=1.2,
+            label="transient windows, x and y",
+        )
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     for g in left:
         band = g.details.get("band")
@@ -73,8 +87,46 @@ def _residual_panels(axes, curves, left):
     ax.set_xscale("log")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("power / noise")
-    ax.set_title("residual by harmonic (shaded: band of a gap left)", fontsize="medium")
+    ax.set_title("residual by frequency (shaded: band of a gap left)", fontsize="medium")
     ax.legend(fontsize="x-small")
+    gap = next((g for g in left if g.view == "transients"), None)
+    for ax, window, name in (
+        (axes[3], "start", "after the start ramp"),
+        (axes[4], "end", "after the end of motion"),
+    ):
+        _transient_panel(ax, curves, window, name, gap)
+
+
+def _transient_panel(ax, curves, window, name, gap):
+    """Mean residual against the time into the windows ``window`` (marked: a gap left there)."""
+    for direction, axis in (("ccw", "x"), ("ccw", "y"), ("cw", "x"), ("cw", "y")):
+        y = curves.transient.get((window, direction, axis))
+        if y is not None and not np.all(np.isnan(y)):
+            ax.plot(curves.transient_ms, y * 1e3, lw=0.9, label=f"{direction.upper()} {axis}")
+    ax.axhline(0.0, color="0.7", lw=0.6)
+    loc = gap.details.get("transient") if gap else None
+    if loc and loc["window"] == name:
+        ax.axvline(loc["time_into_window_ms"], color="r", lw=0.8, ls="--")
+    band = gap.details.get("band") if gap else None
+    if band:
+        ax.text(
+            0.98,
+            0.03,
+            f"gap left: the windows' power peaks at {band['strongest_hz']:.3g} Hz",
+            transform=ax.transAxes,
+            ha="right",
+            color="r",
+            fontsize="small",
+        )
+    ax.set_xlabel(f"time into the window {name} [ms]")
+    ax.set_ylabel("mean residual [mm/s²]")
+    ax.set_title(
+        f"transients {name}\n(each window opens {GUARD_S * 1e3:.0f} ms or more after the "
+        "recording's ramp)",
+        fontsize="medium",
+    )
+    if ax.lines[1:]:
+        ax.legend(fontsize="x-small", ncols=2)
 
 
 def plot_gaps(result, path, title=""):
@@ -89,12 +141,13 @@ def plot_gaps(result, path, title=""):
     title : str
         Figure title, e.g. the recording's name.
     """
-    fig, axes = plt.subplots(2, 2, figsize=(12.0, 8.5), layout="constrained")
+    fig, axes = plt.subplots(2, 3, figsize=(16.0, 9.0), layout="constrained")
     _gaps_panel(axes[0, 0], result)
+    rest = [axes[0, 1], axes[0, 2], axes[1, 0], axes[1, 1], axes[1, 2]]
     if result.curves is not None:
-        _residual_panels([axes[0, 1], axes[1, 0], axes[1, 1]], result.curves, result.gap_left)
+        _residual_panels(rest, result.curves, result.gap_left)
     else:
-        for ax in (axes[0, 1], axes[1, 0], axes[1, 1]):
+        for ax in rest:
             ax.set_axis_off()
     head = result.headline()
     fig.suptitle(f"{title or 'model discrepancy'}\n{head}", fontsize="medium")

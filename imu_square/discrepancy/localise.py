@@ -12,6 +12,11 @@ name the effect themselves:
   new direction of motion);
 - the *frequency band*: the octave of circle harmonics that holds the largest
   excess over the noise (sum of ``z^2 - 2`` over its harmonics), in Hz;
+- for the transient view, the window (after the start ramp or after the end of
+  motion), direction, axis and time into it of its largest bin, and the
+  frequency at which the mean residual of the windows has most power over the
+  noise (a periodogram of the bin means, up to the bins' Nyquist frequency),
+  with a band of one Rayleigh resolution ``1 / TRANSIENT_WINDOW_S`` either side;
 - for the trend and the timing views, the time in the test of the cycle that
   departs most from its block.
 
@@ -26,7 +31,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from imu_square.discrepancy.layout import REVERSAL_BEFORE_S, REVERSAL_BIN_S, TRANSIENT_BIN_S
+from imu_square.discrepancy.layout import (
+    REVERSAL_BEFORE_S,
+    REVERSAL_BIN_S,
+    TRANSIENT_BIN_S,
+    TRANSIENT_WINDOW_S,
+)
 
 # A view whose p-value with the final model is below this holds a gap left unexplained.
 GAP_LEFT_P = 1e-3
@@ -35,6 +45,10 @@ TRACE_POINTS = 720
 # A harmonic of the residual trace is shrunk by max(0, 1 - SHRINK_Z2 / z^2) (z^2 its power
 # over the noise's, 2 on average for noise alone): noise harmonics vanish, a gap's stay.
 SHRINK_Z2 = 6.0
+# The transient periodogram is evaluated this many times more finely than its resolution.
+TRANSIENT_ZERO_PAD = 4
+# Transient groups (layout.with_transients): 2 * after_end + (direction is CW).
+TRANSIENT_GROUPS = (("start", "ccw"), ("start", "cw"), ("end", "ccw"), ("end", "cw"))
 
 
 @dataclass(frozen=True)
@@ -96,6 +110,19 @@ class ResidualCurves:
         under the null, 1 for the offset, times the blocks).
     n_blocks : int
         Blocks summed in :attr:`excess`.
+    transient_ms : ndarray, shape (n_transient_bins,)
+        Bin centres of the transient windows, time into the window (which
+        starts where the recording's feed ramp has ended). [ms]
+    transient : dict of (str, str, str) to ndarray
+        ``("start" | "end", direction, axis)``: mean residual in each bin of
+        the windows after the start ramps or after the ends of motion of the
+        blocks of that direction (NaN where a bin holds no sample). [m/s^2]
+    transient_frequency_hz : ndarray, shape (m,)
+        Frequencies of :attr:`transient_power`, up to the bins' Nyquist
+        frequency. [Hz]
+    transient_power : ndarray, shape (m,)
+        Periodogram of the transient bin means over the noise's, averaged over
+        the windows' groups and axes (1 on average under the null).
     """
 
     angle_deg: np.ndarray
@@ -105,6 +132,10 @@ class ResidualCurves:
     frequency_hz: np.ndarray
     excess: np.ndarray
     n_blocks: int
+    transient_ms: np.ndarray
+    transient: dict
+    transient_frequency_hz: np.ndarray
+    transient_power: np.ndarray
 
 
 def gaps_left(gaps):
@@ -153,6 +184,39 @@ def _band(excess_k, freq, k0, k1):
     }
 
 
+def _transient_curves(space, residual):
+    """Mean residual per transient bin and its periodogram over the noise's.
+
+    Each group and axis's bin means ``m_j``, whitened by their standard
+    deviation ``sqrt(sigma^2 / n_j)``, give ``|sum_j z_j exp(-2 pi i f t_j)|^2 / J``
+    (mean 1 under the null at every ``f``); the mean over the groups and axes
+    that hold samples is returned. The bin means sample the residual every
+    bin, so frequencies above the bins' Nyquist frequency alias below it, and
+    a sinusoid at ``f`` is scaled by about ``sinc(f * bin)`` (0.76 at 0.4 of the bin rate).
+    """
+    layout = space.layout
+    n = layout.n_transient_bins
+    bin_s = max(TRANSIENT_BIN_S, layout.dt_s)
+    centres = (np.arange(n) + 0.5) * bin_s
+    count = np.bincount(layout.transient_bin[layout.transient_bin >= 0], minlength=4 * n)
+    count = count.reshape(4, n).astype(float)
+    df = 1.0 / (TRANSIENT_ZERO_PAD * n * bin_s)
+    freq = np.arange(0.0, 0.5 / bin_s + 0.5 * df, df)
+    phasor = np.exp(-2j * math.pi * np.outer(freq, centres))
+    curves, power = {}, []
+    for a, axis in enumerate(("x", "y")):
+        sums = residual.transient[a].reshape(4, n)
+        for g, (window, direction) in enumerate(TRANSIENT_GROUPS):
+            used = count[g] > 0
+            with np.errstate(invalid="ignore", divide="ignore"):
+                curves[window, direction, axis] = np.where(used, sums[g] / count[g], np.nan)
+            if used.any():
+                z = sums[g][used] / np.sqrt(space.noise.sigma2[a] * count[g][used])
+                power.append(np.abs(phasor[:, used] @ z) ** 2 / used.sum())
+    mean_power = np.mean(power, axis=0) if power else np.zeros(freq.size)
+    return centres * 1e3, curves, freq, mean_power
+
+
 def residual_curves(space, residual):
     """The final residual's curves (:class:`ResidualCurves`)."""
     layout = space.layout
@@ -184,6 +248,7 @@ def residual_curves(space, residual):
                 reversal[axis, after] = np.where(counts[g] > 0, sums[g] / counts[g], np.nan)
     var = space.block_var  # (n_blocks, 2, K + 1)
     z2 = np.abs(residual.block) ** 2 / np.where(k == 0, var, var / 2)
+    transient_ms, transient, transient_hz, transient_power = _transient_curves(space, residual)
     return ResidualCurves(
         angle_deg=np.degrees(angles),
         trace=trace,
@@ -192,6 +257,10 @@ def residual_curves(space, residual):
         frequency_hz=k * layout.frequency_hz,
         excess=z2.sum(axis=0),
         n_blocks=len(layout.blocks),
+        transient_ms=transient_ms,
+        transient=transient,
+        transient_frequency_hz=transient_hz,
+        transient_power=transient_power,
     )
 
 
@@ -259,30 +328,39 @@ def _reversal_location(curves):
     }
 
 
-def _transient_location(space, residual):
+def _transient_location(curves):
     """The transient bin with the largest mean residual: which window, direction, channel, when."""
-    layout = space.layout
-    n = layout.n_transient_bins
-    bins = layout.transient_bin[layout.transient_bin >= 0]
-    count = np.bincount(bins, minlength=4 * n).astype(float)
     best = None
-    for a, axis in enumerate(("x", "y")):
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = np.where(count > 0, residual.transient[a] / count, 0.0)
-        i = int(np.argmax(np.abs(mean)))
-        if best is None or abs(mean[i]) > abs(best[1]):
-            best = (axis, float(mean[i]), i)
-    if best is None or not count.any():
+    for (window, direction, axis), y in curves.transient.items():
+        if np.all(np.isnan(y)):
+            continue
+        i = int(np.nanargmax(np.abs(y)))
+        if best is None or abs(y[i]) > abs(best[3]):
+            best = (window, direction, axis, float(y[i]), i)
+    if best is None:
         return None
-    axis, value, i = best
-    group, j = divmod(i, n)
-    bin_s = max(TRANSIENT_BIN_S, layout.dt_s)
+    window, direction, axis, value, i = best
     return {
-        "window": "after the end of motion" if group >= 2 else "after the start ramp",
-        "direction": "cw" if group % 2 else "ccw",
+        "window": "after the end of motion" if window == "end" else "after the start ramp",
+        "direction": direction,
         "channel": axis,
-        "time_into_window_ms": (j + 0.5) * bin_s * 1e3,
+        "time_into_window_ms": float(curves.transient_ms[i]),
         "peak_m_s2": value,
+    }
+
+
+def _transient_band(curves):
+    """The frequency of the transient periodogram's peak, one resolution either side."""
+    f, p = curves.transient_frequency_hz, curves.transient_power
+    if not np.any(p > 0):
+        return None
+    i = int(np.argmax(p))
+    peak, resolution = float(f[i]), 1.0 / TRANSIENT_WINDOW_S
+    return {
+        "band_hz": [max(0.0, peak - resolution), min(float(f[-1]), peak + resolution)],
+        "strongest_hz": peak,
+        "power_over_noise": float(p[i]),
+        "nyquist_hz": float(f[-1]),
     }
 
 
@@ -366,13 +444,21 @@ def locate_gaps(space, residual, gaps):
                 details["band"] = band
                 parts.append(_band_text(band))
         elif v.name == "transients":
-            loc = _transient_location(space, residual)
+            loc = _transient_location(curves)
             if loc:
                 details["transient"] = loc
                 parts.append(
-                    f"largest {loc['time_into_window_ms']:.0f} ms into the window "
+                    f"largest {loc['time_into_window_ms']:.1f} ms into the window "
                     f"{loc['window']} ({loc['direction'].upper()}, {loc['channel']} channel, "
                     f"{loc['peak_m_s2'] * 1e3:+.2g} mm/s²)"
+                )
+            band = _transient_band(curves)
+            if band:
+                details["band"] = band
+                parts.append(
+                    f"its windows' power peaks at {band['strongest_hz']:.3g} Hz "
+                    f"({band['power_over_noise']:.2g}x the noise; bins alias above "
+                    f"{band['nyquist_hz']:.3g} Hz)"
                 )
         else:  # trend, timing
             loc = _cycle_location(space, residual, v.name)
