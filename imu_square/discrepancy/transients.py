@@ -37,7 +37,8 @@ RAMP_SIGMA = 10.0
 # ... in a run of samples of one sign past the mark lasting this long: a ramp's residual
 # is smooth over tens of milliseconds, a ringing above 50 Hz flips sooner. [s]
 RUN_S = 0.010
-# From the last such sample to the window's start, at least. [s]
+# From the last such run to the window's start, at least; longer than RUN_S, so that a
+# shorter run right after it (the ramp's last, cut by a ringing) stays out too. [s]
 GUARD_S = 0.015
 # ... and this fraction of how far the recording's ramp ran past the model's: a smooth
 # ramp's tail, from the mark down to the noise, lasts longer the longer the ramp.
