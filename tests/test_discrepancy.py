@@ -16,7 +16,9 @@ from scipy import stats
 
 from imu_square.cli import main
 from imu_square.discrepancy import VIEWS, DiscrepancyOptions, find_discrepancy
+from imu_square.discrepancy.parameters import effect_model_parameters
 from imu_square.discrepancy.result import headline_is_honest
+from imu_square.discrepancy.selection import _shape_grid
 from imu_square.discrepancy.workflow import fit_base
 from imu_square.io.mcap import read_mcap, write_mcap
 from imu_square.program import TestProgram
@@ -484,3 +486,15 @@ def test_a_short_take_up_off_the_reversal_is_named_backlash_not_a_spike():
     values = {v.name: v for v in fitted}
     for name, truth in (("x_um", 0.027), ("y_um", -0.030)):
         assert abs(values[name].value - truth) < 3 * values[name].u_value, name
+
+
+def test_the_spike_scan_tries_each_timing_in_its_own_form():
+    # after and led: friction building up (skewed); centred: a stick zone (symmetric).
+    # The form rides on the timing's grid axis: 3 timings x 9 widths, not 2 x 3 x 9.
+    grid = _shape_grid(effect_model_parameters("reversal_spikes"), 200.0)
+    assert len(grid) == 27
+    forms = {(g["onset_tau"], g["symmetric"]) for g in grid}
+    assert forms == {(0.0, 0.0), (-2.0, 1.0), (-4.0, 0.0)}
+    assert sorted({g["tau_ms"] for g in grid if g["symmetric"]}) == sorted(
+        {g["tau_ms"] for g in grid}
+    )

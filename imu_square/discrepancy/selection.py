@@ -125,13 +125,24 @@ class Screen:
 
 def _shape_grid(params, sample_rate_hz):
     shapes = [p for p in params if p.role == SHAPE]
+    # a shape scanned along another joins that one's grid axis, value by value
+    along = {p.declared.scan_along: p for p in shapes if p.declared.scan_along}
     axes = []
     for p in shapes:
+        if p.declared.scan_along:
+            continue
         scan = p.declared.scan or (p.declared.typical,)
         if p.unit == "Hz":  # above the compared band a frequency only aliases
             scan = tuple(v for v in scan if v < NYQUIST_FRACTION * sample_rate_hz) or scan[:1]
-        axes.append([(p, v) for v in scan])
-    return [dict((p.name, v) for p, v in combo) for combo in itertools.product(*axes)]
+        partner = along.get(p.declared.name)
+        if partner is None:
+            axes.append([{p.name: v} for v in scan])
+        else:
+            pairs = zip(scan, partner.declared.scan, strict=True)
+            axes.append([{p.name: v, partner.name: w} for v, w in pairs])
+    return [
+        dict(kv for point in combo for kv in point.items()) for combo in itertools.product(*axes)
+    ]
 
 
 def _with_shape(state, params, shape):
