@@ -216,12 +216,12 @@ EFFECT_PARAMETERS = {
             SHAPE,
             "machine",
             "spike_onset",
-            # after the reversal, centred on it, leading it; declared before the width,
-            # so that a coarse scan of the product grid steps through widths
-            scan=(0.0, -2.0, -4.0),
+            # after the reversal, centred on it (in either form), leading it; declared
+            # before the width, so that a coarse scan of the product grid steps through widths
+            scan=(0.0, -2.0, -2.0, -4.0),
         ),
-        # the bump's form, scanned along its timing: friction building up after the
-        # reversal or leading it (skewed), a stick zone centred on it (symmetric)
+        # the bump's form, scanned along its timing: friction building up (skewed) after
+        # the reversal, centred on it or leading it; a stick zone (symmetric) centred on it
         _p(
             "reversal_spikes",
             "symmetric",
@@ -233,7 +233,7 @@ EFFECT_PARAMETERS = {
             SHAPE,
             "machine",
             "spike_symmetric",
-            scan=(0.0, 1.0, 0.0),
+            scan=(0.0, 0.0, 1.0, 0.0),
             scan_along="onset_tau",
         ),
         _p(
