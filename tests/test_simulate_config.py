@@ -63,9 +63,17 @@ def test_machine_file_units(tmp_path):
         "[straightness_yaw]\nx_um = 4\nyaw_x = true\n"
         "[gravity_coupling]\nx_per_y_urad_per_m = 100\n"
         "[structural_vibration]\nstart_stop_m_s2 = -0.03\n"
+        "[reversal_spikes]\npeak_x_m_s2 = -0.01\nonset_tau = -2\nsymmetric = true\n"
     )
     m = read_machine(path)
     assert m.vibration_start_stop_m_s2 == -0.03
+    assert m.spike_symmetric and m.spike_onset == -2.0 and m.spike_x_m_s2 == -0.01
+    assert m.effects()["reversal_spikes"]["symmetric"] is True
+    # the skewed form's default: its truth is what it was before the symmetric one
+    assert (
+        "symmetric"
+        not in read_machine(data_path("machine_typical.toml")).effects()["reversal_spikes"]
+    )
     assert m.name == "m1" and m.ramp_s == 0.2 and m.ramp_profile == "s_curve"
     assert_allclose(m.geometry.machine_squareness_rad, -12.5e-6, rtol=1e-12)
     assert_allclose(m.geometry.machine_squareness_rate_rad_s, 1e-9, rtol=1e-12)

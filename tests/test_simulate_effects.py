@@ -132,6 +132,8 @@ def _everything():
 def test_written_model_files_read_back_to_the_same_model(tmp_path):
     machine, sensor = _everything()
     assert machine_from_mapping(tomllib.loads(machine_to_toml(machine, "a\nheader"))) == machine
+    stick = replace(machine, spike_symmetric=True)
+    assert machine_from_mapping(tomllib.loads(machine_to_toml(stick))) == stick
     assert sensor_from_mapping(tomllib.loads(sensor_to_toml(sensor))) == sensor
     ideal = SensorModel()  # no drift section, no temperature channel, infinite range
     assert sensor_from_mapping(tomllib.loads(sensor_to_toml(ideal))) == ideal

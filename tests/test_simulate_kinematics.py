@@ -78,10 +78,14 @@ SIGNED = replace(
 )
 
 
+# a stick zone centred on each reversal: the symmetric spike
+STICK = replace(SIGNED, spike_onset=-2.0, spike_symmetric=True)
+
+
 @pytest.mark.parametrize(
     "machine",
-    [MachineModel(), ALL_DRIVE, FIRST_ORDER, SIGNED],
-    ids=["ideal", "all-effects", "first-order-servo", "signed-led"],
+    [MachineModel(), ALL_DRIVE, FIRST_ORDER, SIGNED, STICK],
+    ids=["ideal", "all-effects", "first-order-servo", "signed-led", "stick-zone"],
 )
 def test_analytic_derivatives_match_finite_differences(machine):
     timeline = build_timeline(PROGRAM, machine.ramp_s, machine.ramp_profile, 0.5, 0.5)
@@ -222,6 +226,42 @@ def test_spike_sign_and_timing_around_the_reversal(onset, peak):
     # the position peak, h e^-2 (4 h / e^2 at u = 2), is at (onset + 2) tau
     j = int(np.argmax(np.abs(p[0])))
     assert t[j] == pytest.approx((onset + 2) * tau, abs=2e-5)
+
+
+@pytest.mark.parametrize("d", [1, -1])
+def test_symmetric_spike_is_a_stick_zone_around_the_reversal(d):
+    """Through a reversal at acceleration ``a_r`` the symmetric spike of peak
+    ``-a_r`` leaves the table ``tanh^2(t / tau)`` of the commanded velocity: it
+    stands still at the reversal and the error is an even bump, back to zero."""
+    tau, a_r = 0.01, 0.05
+    t = np.linspace(-0.3, 0.3, 60001)
+    p = [np.zeros_like(t) for _ in range(3)]
+    add_spikes(p, t, np.array([0.0]), np.array([d]), -a_r, tau, onset=-2.0, symmetric=True)
+    v_command = d * a_r * t
+    assert_allclose(v_command + p[1], v_command * np.tanh(t / tau) ** 2, rtol=0, atol=1e-15)
+    # even in time; inward (along d) by a_r tau^2 ln 2 at the reversal, where the
+    # acceleration is largest, a_r; zero net impulse and displacement at both ends
+    assert_allclose(p[0], p[0][::-1], rtol=0, atol=1e-13 * a_r * tau**2)
+    centre = t.size // 2
+    assert p[0][centre] == pytest.approx(d * a_r * tau**2 * math.log(2), rel=1e-12)
+    assert np.abs(p[2]).max() == pytest.approx(a_r, rel=1e-12)
+    assert abs(p[2][centre]) == pytest.approx(a_r, rel=1e-12)
+    assert_allclose([p[0][0], p[0][-1], p[1][0], p[1][-1]], 0.0, atol=1e-18)
+    assert np.sum(p[2]) * 1e-5 == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("onset", [0.0, -4.0])
+def test_symmetric_spike_peaks_where_the_skewed_one_does(onset):
+    tau = 0.01
+    t = np.arange(-0.3, 0.4, 1e-5)
+    peaks = []
+    for symmetric in (False, True):
+        p = [np.zeros_like(t) for _ in range(3)]
+        add_spikes(p, t, np.array([0.0]), np.array([1]), 0.02, tau, onset, symmetric)
+        peaks.append(t[int(np.argmax(np.abs(p[0])))])
+        # outward (along -d) for a positive peak, in either form
+        assert p[0].max() == 0.0 and p[0].min() < 0.0
+    assert_allclose(peaks, (onset + 2) * tau, atol=2e-5)
 
 
 @pytest.mark.parametrize("size", [0.02, -0.01])

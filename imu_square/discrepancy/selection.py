@@ -105,6 +105,9 @@ class Screen:
         ``(shape dict, fit-vector directions split by channel)`` of every grid point run.
     inert : set of str
         Keys of the sizes not identifiable at the first screening.
+    forms : list of dict
+        The best grid point of each other form (a flag scanned along another
+        shape, such as the spike's symmetric bump): the refit decides.
     """
 
     effect: str
@@ -121,17 +124,29 @@ class Screen:
     cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     grid: list = field(default_factory=list)
     inert: set | None = None
+    forms: list = field(default_factory=list)
 
 
 def _shape_grid(params, sample_rate_hz):
     shapes = [p for p in params if p.role == SHAPE]
+    # a shape scanned along another joins that one's grid axis, value by value
+    along = {p.declared.scan_along: p for p in shapes if p.declared.scan_along}
     axes = []
     for p in shapes:
+        if p.declared.scan_along:
+            continue
         scan = p.declared.scan or (p.declared.typical,)
         if p.unit == "Hz":  # above the compared band a frequency only aliases
             scan = tuple(v for v in scan if v < NYQUIST_FRACTION * sample_rate_hz) or scan[:1]
-        axes.append([(p, v) for v in scan])
-    return [dict((p.name, v) for p, v in combo) for combo in itertools.product(*axes)]
+        partner = along.get(p.declared.name)
+        if partner is None:
+            axes.append([{p.name: v} for v in scan])
+        else:
+            pairs = zip(scan, partner.declared.scan, strict=True)
+            axes.append([{p.name: v, partner.name: w} for v, w in pairs])
+    return [
+        dict(kv for point in combo for kv in point.items()) for combo in itertools.product(*axes)
+    ]
 
 
 def _with_shape(state, params, shape):
@@ -286,8 +301,16 @@ class Screener:
     def _best_shape(self, screen, r, q):
         if not screen.grid:
             return screen.shape
-        scores = [_lr(r, _perp(q, v))[0] for _, v in screen.grid]
-        return screen.grid[int(np.argmax(scores))][0]
+        keys = [p.name for p in effect_model_parameters(screen.effect) if p.declared.scan_along]
+        best = {}
+        for shape, v in screen.grid:
+            form = tuple(shape[k] for k in keys)
+            score = _lr(r, _perp(q, v))[0]
+            if form not in best or score > best[form][0]:
+                best[form] = (score, shape)
+        ranked = sorted(best.values(), key=lambda b: -b[0])
+        screen.forms = [shape for _, shape in ranked[1:]]
+        return ranked[0][1]
 
     def rescreen(self, screen, outcome, fresh=False):
         """Score a screened candidate again at a new fit.
@@ -411,6 +434,12 @@ def _trial(problem, outcome, screen, first):
         sd = np.sqrt(max(screen.cov[0, 0], cov0[0, 0] if same else 0.0))
         starts = [np.array([_scan(problem, outcome, screen, starts, sd)])]
     fit, shapes = _refit(problem, outcome, screen, starts)
+    # a form screened second can refit better (a skewed spike's width between two grid
+    # points screens as the symmetric bump): the refit decides
+    for form in screen.forms:
+        other, _ = _refit(problem, outcome, replace(screen, shape=form), starts)
+        if other.rss < fit.rss:
+            fit, screen.shape = other, form
     lr = outcome.rss - fit.rss
     return _p_adjusted(fit, screen, lr), -lr, fit, shapes
 

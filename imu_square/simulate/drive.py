@@ -16,7 +16,16 @@ direction of motion after the reversal (+1 or -1), ``t'`` the time since it.
   whose acceleration starts at the peak ``2 h / tau_s^2`` and has zero area;
   ``h`` is signed (negative: inward, an over-set friction compensation) and the
   onset ``o`` (in ``tau_s``) places it after the reversal (0), centred on it
-  (-2: the position peak on the reversal) or leading it (below -2);
+  (-2: the position peak on the reversal) or leading it (below -2). This
+  skewed bump is friction building up after the reversal. Its symmetric
+  form is a stick zone around the reversal: through a reversal at
+  acceleration ``a_r`` the commanded velocity is ``d a_r t'``; a table that
+  keeps only ``1 - k sech^2(t'/tau_s)`` of it lags by an error whose
+  velocity, ``-k d a_r t' sech^2``, is odd in time, so the error is the even
+  bump ``-d A tau_s^2 g(s)``, ``g = ln 2 + ln cosh s - s tanh s >= 0``, back
+  to zero on both sides, with ``A = -k a_r`` (a full stick, ``k = 1``, stops
+  the table at the reversal: inward). Its acceleration is largest at the
+  centre, ``|A|``; ``s = u - 2`` puts its peak where the skewed bump's is;
 - structural vibration: ``-d D exp(-sigma t') (1 - cos(omega_d t'))``, which
   starts with zero position and velocity and acceleration ``D omega_d^2``.
   The same mode is also rung at the corners of each block's feed ramps,
@@ -29,6 +38,7 @@ import numpy as np
 # of their size and are dropped (backlash becomes an exact step).
 _TANH_WINDOW = 20.0
 _SPIKE_WINDOW = 45.0
+_SYMMETRIC_WINDOW = 20.0  # either side of the centre: (1 + 2 s) exp(-2 s) < 1e-15
 _VIBRATION_DECAY = 35.0
 
 
@@ -77,8 +87,8 @@ def add_backlash(p, t, times, directions, initial, lost_m, take_up_s, onset=0.0)
     p[0] += -0.5 * lost_m * state
 
 
-def add_spikes(p, t, times, directions, peak_m_s2, tau_s, onset=0.0):
-    """Add friction following-error bumps after each reversal, in place.
+def add_spikes(p, t, times, directions, peak_m_s2, tau_s, onset=0.0, symmetric=False):
+    """Add friction following-error bumps at each reversal, in place.
 
     Parameters
     ----------
@@ -89,13 +99,22 @@ def add_spikes(p, t, times, directions, peak_m_s2, tau_s, onset=0.0):
     times, directions : ndarray
         Reversal times [s] and the direction after each.
     peak_m_s2 : float
-        Peak acceleration ``2 h / tau_s^2`` of the bump; negative inward. [m/s^2]
+        Largest acceleration of the bump: ``2 h / tau_s^2`` at the skewed
+        bump's start, ``|A|`` at the symmetric bump's centre; positive
+        outward (the position bump against the new direction). [m/s^2]
     tau_s : float
         Time constant of the bump. [s]
     onset : float
-        Start of the bump after the reversal, in units of ``tau_s`` (negative: before).
+        Start of the skewed bump after the reversal, in units of ``tau_s``
+        (negative: before); the position peak of either form is at
+        ``(onset + 2) tau_s``.
+    symmetric : bool
+        The stick zone's even bump instead of the friction build-up's skewed one.
     """
     if peak_m_s2 == 0:
+        return
+    if symmetric:
+        _add_symmetric_spikes(p, t, times, directions, peak_m_s2, tau_s, onset + 2.0)
         return
     h = 0.5 * peak_m_s2 * tau_s**2
     for tk, dk in zip(times, directions, strict=True):
@@ -106,6 +125,21 @@ def add_spikes(p, t, times, directions, peak_m_s2, tau_s, onset=0.0):
         p[0][sl] += e * u * u
         p[1][sl] += e * (2.0 * u - u * u) / tau_s
         p[2][sl] += e * (2.0 - 4.0 * u + u * u) / tau_s**2
+
+
+def _add_symmetric_spikes(p, t, times, directions, peak_m_s2, tau_s, centre):
+    for tk, dk in zip(times, directions, strict=True):
+        tk = tk + centre * tau_s
+        sl = _window(t, tk - _SYMMETRIC_WINDOW * tau_s, tk + _SYMMETRIC_WINDOW * tau_s)
+        s = (t[sl] - tk) / tau_s
+        # in q = exp(-2|s|), exact in the tails: g = 2|s| q / (1 + q) + log1p(q)
+        q = np.exp(-2.0 * np.abs(s))
+        sech2 = 4.0 * q / (1.0 + q) ** 2
+        th = np.tanh(s)
+        a = -dk * peak_m_s2
+        p[0][sl] += a * tau_s**2 * (2.0 * np.abs(s) * q / (1.0 + q) + np.log1p(q))
+        p[1][sl] += a * tau_s * (-s * sech2)
+        p[2][sl] += a * (-sech2 * (1.0 - 2.0 * s * th))
 
 
 def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):

@@ -64,6 +64,10 @@ class EffectParameter:
         For a shape: values to try first, in display units.
     observed_by : tuple of str
         Extra channels that observe this parameter directly.
+    scan_along : str
+        For a shape scanned together with another (not across it): that
+        one's name; its ``scan`` pairs value by value with the other's, one
+        grid axis for both.
     """
 
     effect: str
@@ -78,6 +82,7 @@ class EffectParameter:
     path: str
     scan: tuple = ()
     observed_by: tuple = ()
+    scan_along: str = ""
 
     @property
     def key(self):
@@ -86,8 +91,8 @@ class EffectParameter:
 
     @property
     def is_flag(self):
-        """Whether the parameter is a true/false switch (its scan is (0, 1))."""
-        return self.scan == (0.0, 1.0) and self.unit == "flag"
+        """Whether the parameter is a true/false switch (its scan is of 0 and 1)."""
+        return set(self.scan) == {0.0, 1.0} and self.unit == "flag"
 
     def get(self, machine, sensor):
         """The parameter's SI value on a machine and sensor."""
@@ -131,6 +136,7 @@ _FLAGS = {
     "yaw_x": (False, True),
     "yaw_y": (False, True),
     "servo_model": ("pure_lag", "first_order"),
+    "spike_symmetric": (False, True),
 }
 
 
@@ -210,9 +216,25 @@ EFFECT_PARAMETERS = {
             SHAPE,
             "machine",
             "spike_onset",
-            # after the reversal, centred on it, leading it; declared before the width,
-            # so that a coarse scan of the product grid steps through widths
-            scan=(0.0, -2.0, -4.0),
+            # after the reversal, centred on it (in either form), leading it; declared
+            # before the width, so that a coarse scan of the product grid steps through widths
+            scan=(0.0, -2.0, -2.0, -4.0),
+        ),
+        # the bump's form, scanned along its timing: friction building up (skewed) after
+        # the reversal, centred on it or leading it; a stick zone (symmetric) centred on it
+        _p(
+            "reversal_spikes",
+            "symmetric",
+            "flag",
+            1.0,
+            0.0,
+            1.0,
+            0.0,
+            SHAPE,
+            "machine",
+            "spike_symmetric",
+            scan=(0.0, 0.0, 1.0, 0.0),
+            scan_along="onset_tau",
         ),
         _p(
             "reversal_spikes",

@@ -188,7 +188,9 @@ def carriage_motion(timeline, machine, t):
             add_backlash(
                 p, t, times, directions, initial, lost, m.backlash_take_up_s, m.backlash_onset
             )
-            add_spikes(p, t, times, directions, spike, m.spike_tau_s, m.spike_onset)
+            add_spikes(
+                p, t, times, directions, spike, m.spike_tau_s, m.spike_onset, m.spike_symmetric
+            )
             add_vibration(p, t, times, directions, vibration, m.vibration_hz, m.vibration_damping)
         ring_at_block_edges(p, timeline, t, axis, delays, m)
         paths.append(p)

@@ -42,6 +42,7 @@ A machine file (all sections optional; absent = ideal)::
     peak_y_m_s2 = 0.0
     tau_ms = 20.0
     onset_tau = 0.0               # its start after the reversal, in tau (-2: centred, < -2: led)
+    symmetric = false             # an even bump peaking at (onset_tau + 2) tau: a stick zone
 
     [structural_vibration]
     accel_x_m_s2 = 0.0
@@ -106,6 +107,12 @@ class MachineModel:
         Start of the bump relative to the reversal, in units of
         ``spike_tau_s``: 0 starts at the reversal (after it), -2 puts its
         position peak on the reversal (centred), below that it leads.
+    spike_symmetric : bool
+        The bump's form: skewed (false: friction building up after its
+        start) or symmetric (true: a stick zone around the reversal, the
+        table keeping ``tanh^2`` of the commanded speed), its peak at
+        ``(spike_onset + 2) spike_tau_s`` either way
+        (:func:`~imu_square.simulate.drive.add_spikes`).
     vibration_x_m_s2, vibration_y_m_s2 : float
         Initial acceleration of the oscillation excited at a reversal. [m/s^2]
     vibration_hz : float
@@ -136,6 +143,7 @@ class MachineModel:
     spike_y_m_s2: float = 0.0
     spike_tau_s: float = 0.02
     spike_onset: float = 0.0
+    spike_symmetric: bool = False
     vibration_x_m_s2: float = 0.0
     vibration_y_m_s2: float = 0.0
     vibration_hz: float = 40.0
@@ -187,6 +195,8 @@ class MachineModel:
                 "tau_s": self.spike_tau_s,
                 "onset_tau": self.spike_onset,
             }
+            if self.spike_symmetric:  # only then: the skewed form's truth is as it was
+                out["reversal_spikes"]["symmetric"] = True
         if self.vibration_x_m_s2 or self.vibration_y_m_s2 or self.vibration_start_stop_m_s2:
             out["structural_vibration"] = {
                 "accel_x_m_s2": self.vibration_x_m_s2,
@@ -229,7 +239,13 @@ _LAYOUT = {
     },
     "servo_mismatch": {"tau_x_ms": 0.0, "tau_y_ms": 0.0, "model": "pure_lag"},
     "backlash": {"x_um": 0.0, "y_um": 0.0, "take_up_ms": 5.0, "onset": 0.0},
-    "reversal_spikes": {"peak_x_m_s2": 0.0, "peak_y_m_s2": 0.0, "tau_ms": 20.0, "onset_tau": 0.0},
+    "reversal_spikes": {
+        "peak_x_m_s2": 0.0,
+        "peak_y_m_s2": 0.0,
+        "tau_ms": 20.0,
+        "onset_tau": 0.0,
+        "symmetric": False,
+    },
     "structural_vibration": {
         "accel_x_m_s2": 0.0,
         "accel_y_m_s2": 0.0,
@@ -326,6 +342,7 @@ def machine_from_mapping(doc, source="<machine>"):
         spike_y_m_s2=spikes.number("peak_y_m_s2", -100.0, 100.0),
         spike_tau_s=spikes.number("tau_ms", 0.0, 1e3, lo_open=True) * MS,
         spike_onset=spikes.number("onset_tau", -10.0, 10.0),
+        spike_symmetric=spikes.flag("symmetric"),
         vibration_x_m_s2=vibration.number("accel_x_m_s2", -100.0, 100.0),
         vibration_y_m_s2=vibration.number("accel_y_m_s2", -100.0, 100.0),
         vibration_hz=vibration.number("frequency_hz", 0.0, 1e4, lo_open=True),

@@ -75,6 +75,7 @@ def axis_parameters(machine, axis):
         m.backlash_onset,
         m.spike_tau_s,
         m.spike_onset,
+        m.spike_symmetric,
         m.vibration_hz,
         m.vibration_damping,
         m.vibration_start_stop_m_s2,
@@ -100,15 +101,15 @@ def axis_motion(timeline, machine, t_s, axis):
     list of 3 ndarray
         [m, m/s, m/s^2]
     """
-    tau, lost, spike, vibration, _, take_up, take_up_onset, spike_tau, onset, hz, damping, _ = (
-        axis_parameters(machine, axis)
-    )
+    params = axis_parameters(machine, axis)
+    tau, lost, spike, vibration = params[:4]
+    take_up, take_up_onset, spike_tau, onset, symmetric, hz, damping = params[5:12]
     p, delays = servo_path(timeline, t_s, axis, tau, machine.servo_model)
     if lost or spike or vibration:
         times, directions, initial = timeline.reversals(axis)
         times = times + reversal_delays(times, delays)
         add_backlash(p, t_s, times, directions, initial, lost, take_up, take_up_onset)
-        add_spikes(p, t_s, times, directions, spike, spike_tau, onset)
+        add_spikes(p, t_s, times, directions, spike, spike_tau, onset, symmetric)
         add_vibration(p, t_s, times, directions, vibration, hz, damping)
     ring_at_block_edges(p, timeline, t_s, axis, delays, machine)
     return p

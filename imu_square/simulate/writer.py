@@ -91,6 +91,7 @@ def machine_to_toml(machine, header=""):
                 "peak_y_m_s2": m.spike_y_m_s2,
                 "tau_ms": m.spike_tau_s / MS,
                 "onset_tau": m.spike_onset,
+                "symmetric": bool(m.spike_symmetric),
             },
         ),
         (

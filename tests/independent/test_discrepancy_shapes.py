@@ -30,12 +30,14 @@ ALPHA = {"squareness_rad": 50e-6}
 # Lost motion of X (Y has 0.7 of it): 4.0x the backlash candidate's detection limit on
 # this test (the benchmark's 50 %-power noncentrality of its 2-dof test). [m]
 LOST_M = 40e-9
+# The generator's spikes' width. [s]
+SPIKE_WIDTH_S = 0.01
 
 
 def _spikes(shape, height):
     return [
-        {"axis": "x", "shape": shape, "height_m": height, "width_s": 0.01},
-        {"axis": "y", "shape": shape, "height_m": 0.7 * height, "width_s": 0.01},
+        {"axis": "x", "shape": shape, "height_m": height, "width_s": SPIKE_WIDTH_S},
+        {"axis": "y", "shape": shape, "height_m": 0.7 * height, "width_s": SPIKE_WIDTH_S},
     ]
 
 
@@ -88,6 +90,39 @@ def test_an_effect_with_no_candidate_leaves_a_gap_in_the_headline():
     # the gap's band: harmonics of the circle near v / pitch (5 Hz here), not the circle's own
     bands = [g.details["band"]["band_hz"] for g in result.gap_left if "band" in g.details]
     assert any(lo <= 5.0 * 1.6 and hi >= 5.0 / 1.6 for lo, hi in bands), bands
+
+
+# ------------------------------------------------------------------- spikes centred on the reversal
+
+# A centred spike (the generator's symmetric bump) of this height is 5.1x the
+# candidate's detection limit on this test (the benchmark's 50 %-power noncentrality of
+# its 2-dof test: 39 nm here). [m]
+CENTRED_M = 2e-7
+# The stick zone's bump nearest the generator's (least squares on the acceleration):
+# tau = 1.26 w, largest acceleration 1.09 h / w^2 (1.8 % of the energy left over).
+TAU_PER_WIDTH = 1.26
+PEAK_PER_H_W2 = 1.09
+
+
+@pytest.mark.parametrize("sense", [-1.0, 1.0], ids=["inward", "outward"])
+def test_a_spike_centred_on_the_reversal_is_a_symmetric_reversal_spike(sense):
+    height = sense * CENTRED_M
+    result, named = _run({"spikes": _spikes("centred", height)})
+    # not a backlash as well: the skewed bump alone left a gap that one filled
+    assert named == {"reversal_spikes"}, result.headline()
+    assert "reversals" not in {g.view for g in result.gap_left}, result.headline()
+    (step,) = result.steps
+    fitted = {p.name: p for p in step.parameters}
+    assert fitted["symmetric"].value == 1.0
+    # its peak on the reversal: (onset + 2) tau = 0
+    onset = fitted["onset_tau"]
+    assert onset.value == pytest.approx(-2.0, abs=4 * onset.u_value)
+    tau = fitted["tau_ms"]
+    assert tau.value == pytest.approx(TAU_PER_WIDTH * SPIKE_WIDTH_S * 1e3, rel=0.1)
+    for axis, share in (("x", 1.0), ("y", 0.7)):
+        peak = fitted[f"peak_{axis}_m_s2"]
+        expected = PEAK_PER_H_W2 * share * height / SPIKE_WIDTH_S**2
+        assert peak.value == pytest.approx(expected, abs=4 * peak.u_value)
 
 
 # --------------------------------------------------------------------------- friction-rung modes
