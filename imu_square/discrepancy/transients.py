@@ -13,19 +13,23 @@ So each window starts where the recording's ramp has ended: the residual of
 the starting model (recording minus model, unclipped) is searched from one
 ramp before to one ramp after the model's end of the start ramp (or of the
 motion), and on for another ramp past each sample found, as long as samples
-are found (a controller's ramp of 0.5 s or 1 s runs far past the model's
-0.15 s one). A run of samples of one sign beyond :data:`RAMP_SIGMA`
-white-noise sigmas, lasting :data:`RUN_S` or longer, marks the ramp as still
-running, and the window starts :data:`GUARD_S` after the last such run, or
-:data:`GUARD_FRACTION` of how far it ran past the model's edge if longer (or
-after the model's own ramp, if later). A raised-cosine ramp of 0.2 s falls
-from 10 sigmas to nothing in 8 ms (the time grows as the ramp's length to the
-power 1.5; a trapezoid or an s-curve stops within a millisecond). Under the
-null no sample crosses the mark. A ringing above 50 Hz crosses it in runs of
-half its period, and so does not move its own window past itself (at 80 Hz
-and a few hundred sigmas it did, by 20 ms). A slower ringing that crosses the
-mark still moves its window later, which costs signal but never a false
-alarm: the mark is high so that a ringing of a few times the noise does not.
+are found (a controller's ramp of 0.5 s or 1 s runs far past the model's 0.15
+s one). A run of samples of one sign beyond :data:`RAMP_SIGMA` white-noise
+sigmas, lasting :data:`RUN_S` or longer, marks the ramp as still running, and
+the window starts :data:`GUARD_S` after the last such run, or
+:data:`GUARD_FRACTION` of how far it ran past the model's edge, or
+:data:`TAIL_DECAYS` decay times of the run's tail, if longer (or after the
+model's own ramp, if later). A servo's first-order lag ends each ramp in an
+exponential tail with the lag's decay time; 15 ms after a 15-40 ms tail
+crossed the mark it still stood at several sigmas, and left a false gap. A
+raised-cosine ramp of 0.2 s falls from 10 sigmas to nothing in 8 ms (the time
+grows as the ramp's length to the power 1.5; a trapezoid or an s-curve stops
+within a millisecond). Under the null no sample crosses the mark. A ringing
+above 50 Hz crosses it in runs of half its period, and so does not move its
+own window past itself (at 80 Hz and a few hundred sigmas it did, by 20 ms). A
+slower ringing that crosses the mark still moves its window later, which costs
+signal but never a false alarm: the mark is high so that a ringing of a few
+times the noise does not.
 """
 
 import math
@@ -43,6 +47,11 @@ GUARD_S = 0.015
 # ... and this fraction of how far the recording's ramp ran past the model's: a smooth
 # ramp's tail, from the mark down to the noise, lasts longer the longer the ramp.
 GUARD_FRACTION = 0.25
+# ... and this many decay times of the last run's tail, timed from TAIL_RATIO times the
+# mark down to it: a servo's first-order lag ends its ramp in an exponential tail, whose
+# decay time is the lag's, and ln(RAMP_SIGMA / 0.5) of them take it to half a sigma.
+TAIL_RATIO = 3.0
+TAIL_DECAYS = math.log(RAMP_SIGMA / 0.5)
 
 
 def _recording_time(model, state, block, tau):
@@ -55,33 +64,50 @@ def _recording_time(model, state, block, tau):
 
 
 def _last_crossing(model, state, block, t_all, xy_all, sigma, lo, hi):
-    """Time of the last sample in ``[lo, hi)`` whose residual crosses the mark, or -inf. [s]"""
+    """The last run in ``[lo, hi)`` that marks a ramp as running: its end and its decay.
+
+    Returns
+    -------
+    end : float
+        Time of the run's last sample, or -inf without such a run. [s]
+    decay : float
+        Its tail's decay time: from its last sample :data:`TAIL_RATIO` times
+        past the mark (or from its largest, if none is) down to the mark, as
+        an exponential's; 0 without one. [s]
+    """
     i0, i1 = np.searchsorted(t_all, (lo, hi))
     if i1 <= i0:
-        return -math.inf
+        return -math.inf, 0.0
     t = t_all[i0:i1]
     r = xy_all[i0:i1] - model.samples_at(state, t, block)
-    last = -math.inf
+    last = (-math.inf, 0.0)
     for k in range(2):
-        side = np.sign(r[:, k]) * (np.abs(r[:, k]) > RAMP_SIGMA * sigma[k])
+        z = np.abs(r[:, k]) / (RAMP_SIGMA * sigma[k])
+        side = np.sign(r[:, k]) * (z > 1.0)
         # runs of one sign past the mark; a ramp's last longer than a ringing's half period
         edges = np.flatnonzero(np.diff(side)) + 1
         for a, b in zip(np.r_[0, edges], np.r_[edges, side.size], strict=True):
-            if side[a] and t[b - 1] - t[a] >= RUN_S:
-                last = max(last, float(t[b - 1]))
+            if side[a] and t[b - 1] - t[a] >= RUN_S and t[b - 1] > last[0]:
+                high = np.flatnonzero(z[a:b] >= TAIL_RATIO)
+                j = a + (high[-1] if high.size else int(np.argmax(z[a:b])))
+                decay = (t[b - 1] - t[j]) / math.log(max(z[j], 1.0)) if z[j] > 1.5 else 0.0
+                last = (float(t[b - 1]), float(decay))
     return last
 
 
 def _ramp_end(model, state, block, t_all, xy_all, sigma, edge, ramp, lo, hi):
-    """Last crossing of the mark around ``edge``, followed a ramp at a time, or -inf. [s]"""
-    last = -math.inf
+    """The last run past the mark around ``edge``, followed a ramp at a time.
+
+    Returns its end (-inf without one) and its decay (:func:`_last_crossing`). [s]
+    """
+    last = (-math.inf, 0.0)
     start, stop = max(edge - ramp, lo), min(edge + ramp, hi)
     while start < stop:
         seen = _last_crossing(model, state, block, t_all, xy_all, sigma, start, stop)
-        if seen == -math.inf:
+        if seen[0] == -math.inf:
             break
         last = seen
-        start, stop = stop, min(seen + ramp, hi)
+        start, stop = stop, min(seen[0] + ramp, hi)
     return last
 
 
@@ -123,7 +149,7 @@ def transient_windows(model, state, t_all, xy_all, sigma):
             (start + ramp, start, first, False),
             (end, last, later, True),
         ):
-            seen = _ramp_end(model, state, b, t_all, xy_all, sigma, edge, ramp, lo, hi)
-            guard = max(GUARD_S, GUARD_FRACTION * (seen - edge))
+            seen, decay = _ramp_end(model, state, b, t_all, xy_all, sigma, edge, ramp, lo, hi)
+            guard = max(GUARD_S, GUARD_FRACTION * (seen - edge), TAIL_DECAYS * decay)
             out.append((b, max(edge, seen) + guard, hi, after_end))
     return out
