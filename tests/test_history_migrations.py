@@ -199,6 +199,15 @@ def test_a_version_4_history_gets_empty_diagnostics_and_keeps_its_runs_and_basel
             for i, v in enumerate(fit.values)
         )
         assert got.failure is None and got.fit == {"rss": 1.0}
+        # the run fitted again under other settings: each set of settings, oldest first
+        other = dataclasses.replace(fit, settings={"effects": ["backlash"], "motion": "linuxcnc"})
+        other = dataclasses.replace(other, settings_hash=None)
+        assert h.add_diagnostic_fit(other)[1]
+        assert h.diagnostic_settings(MACHINE) == {
+            fit.settings_hash: fit.settings,
+            other.settings_hash: other.settings,
+        }
+        assert h.diagnostic_settings("another machine") == {}
         # a replay skips the recording now that its valid run has a fit under these settings
         assert h.diagnosed_hashes(MACHINE, row.settings_hash, fit.settings_hash) == {
             row.recording_sha256

@@ -168,16 +168,17 @@ def test_history_its_charts_and_the_report_show_each_diagnostic(grown, capsys):
 
 
 @pytest.mark.slow
-def test_a_diagnostic_alarm_stands_when_the_commanded_motion_changes(grown, capsys):
-    # backlash_x's alarm fired on fits with our own trajectory's motion; with LinuxCNC's
-    # (nightly --motion linuxcnc) no diagnostic has a baseline, but the machine's backlash
-    # has not shrunk: the alarm stands until a new baseline is set, and says on what
+def test_a_diagnostic_alarm_stands_when_the_diagnostic_settings_change(grown, tmp_path, capsys):
+    # backlash_x's alarm fired on fits with our own trajectory's motion and the default
+    # effects; with LinuxCNC's motion (nightly --motion linuxcnc), or fewer effects, no
+    # diagnostic has a baseline, but the machine's backlash has not shrunk: the alarm
+    # stands until a new baseline is set, and says on what fits
     from imu_square.monitor.config import read_monitor
     from imu_square.monitor.night import judge_history
     from imu_square.monitor.report.html import render_report
     from imu_square.monitor.verdict import iso
 
-    folder, _, _ = grown
+    folder, records, _ = grown
     config = read_monitor(folder / "monitor.toml")
     with open_history(folder / "history.db") as h:
         trajectory = judge_history(config, h)
@@ -188,6 +189,7 @@ def test_a_diagnostic_alarm_stands_when_the_commanded_motion_changes(grown, caps
     standing = {t.diagnostic.name: t for t in linuxcnc.diagnostics}
     x = standing["backlash_x"]
     assert x.baseline is None and x.alarm_since_ns == fired["backlash_x"]
+    assert x.fired_on == "the motion 'trajectory'"
     assert x.note.endswith(
         f"; its alarm on the fits with the motion 'trajectory' stands since {since}, until a "
         "new baseline is set"
@@ -195,7 +197,7 @@ def test_a_diagnostic_alarm_stands_when_the_commanded_motion_changes(grown, caps
     # the other diagnostics had no alarm: no baseline, and nothing stands
     assert all(t.alarm_since_ns is None for n, t in standing.items() if n != "backlash_x")
     assert "stands since" not in standing["backlash_y"].note
-    assert _alarm_cell(render_report(linuxcnc), "backlash_x") == f"not judged; {x.note}"
+    assert _alarm_cell(render_report(linuxcnc), "backlash_x") == f"alarm; {x.note}"
     # history under LinuxCNC's motion lists it with the alarms standing
     lc = folder / "linuxcnc.toml"
     lc.write_text(
@@ -207,6 +209,21 @@ def test_a_diagnostic_alarm_stands_when_the_commanded_motion_changes(grown, caps
     assert main(["history", "--config", str(lc)]) == 0
     out = capsys.readouterr().out.splitlines()
     assert f"diagnostic alarms standing: backlash_x since {since}" in out
+    # a night judged with fewer effects (a new key, fitted tonight): in alarm in its record,
+    # which the alerts read, and its verdict says on what fits
+    copy = copy_base(folder, tmp_path)
+    text = (copy / "monitor.toml").read_text()
+    (copy / "monitor.toml").write_text(text.replace(ALARMED, BACKLASH_ONLY))
+    day, grown_um, _ = records[-1]
+    code, record = judge(copy / "monitor.toml", backlash_night(copy, day + 1, grown_um))
+    assert code == EXIT_CODES["ok"] and record["diagnostic_alarms"] == ["backlash_x"]
+    assert record["diagnostics"]["backlash_x"]["change"] is None
+    assert record["verdict"].endswith(
+        f"; diagnostic alarm: backlash_x (alarm on the fits with other effects since {since}, "
+        "until a new baseline is set): check the machine"
+    )
+    (alert,) = map(json.loads, (copy / "data" / "alert.json").read_text().splitlines()[-1:])
+    assert "diagnostic alarm: backlash_x" in alert["verdict"]
 
 
 @pytest.mark.slow

@@ -8,10 +8,11 @@ with an alarm, the designed charts' state (:mod:`.alarms`). The charts run
 over every night since the baseline that has a value, in recording-time
 order, whatever the squareness's state that night (a backlash does not
 depend on the sensor's thermal state or mounting). An alarm stands until a
-new baseline is set, as the squareness's does: also when the program's
-commanded motion changes, so that the fits it was found on are kept under
-another key (the diagnostic, with no baseline under the new motion, carries
-the old motion's standing alarm and says so).
+new baseline is set, as the squareness's does: also when the diagnostic
+settings change (the program's commanded motion, the effects, the software),
+so that the fits it was found on are kept under another key; the diagnostic,
+with no baseline under the new settings, carries the standing alarm and says
+on which fits it fired.
 """
 
 import math
@@ -21,7 +22,6 @@ from imu_square.errors import MonitorError
 from imu_square.log import logger
 from imu_square.monitor.diagnostics.alarms import describe, design_inputs, stored_design
 from imu_square.monitor.diagnostics.baseline import MIN_NIGHTS, diagnostic_baseline
-from imu_square.simulate.sources import MOTION_SOURCES
 from imu_square.units import URAD
 
 NO_FIT = "no diagnostic fit under the monitor file's [diagnostics]"
@@ -81,6 +81,9 @@ class DiagnosticTrend:
         Why it has no baseline or no alarm although one was asked; "" otherwise.
     alarm_since_ns : int or None
         When its standing alarm fired. [ns]
+    fired_on : str
+        The fits its standing alarm fired on, when under other diagnostic
+        settings (e.g. "the motion 'trajectory'"); "" for these settings'.
     """
 
     diagnostic: object
@@ -90,6 +93,7 @@ class DiagnosticTrend:
     step: float | None = None
     note: str = ""
     alarm_since_ns: int | None = None
+    fired_on: str = ""
 
     def night_of(self, run_id):
         """The night of a run, or None."""
@@ -124,18 +128,23 @@ def judge_diagnostics(history, runs, baseline_row, settings, alarms):
     """
     if not settings.enabled or not runs:
         return ()
-    trends = _trends(history, runs, baseline_row, settings, alarms)
+    machine = runs[0].machine_id
+    current = settings.key()
+    trends = _trends(
+        history, runs, history.diagnostic_fits(machine, current), baseline_row, settings, alarms
+    )
     if baseline_row is None or all(t.baseline is not None for t in trends):
         return trends
-    for motion in MOTION_SOURCES:
-        if motion != settings.motion:
-            other = _trends(history, runs, baseline_row, replace(settings, motion=motion), alarms)
-            trends = tuple(_standing(t, o, motion) for t, o in zip(trends, other, strict=True))
+    for key, stored in history.diagnostic_settings(machine).items():
+        if key != current:
+            fits = history.diagnostic_fits(machine, key)
+            other = _trends(history, runs, fits, baseline_row, settings, alarms)
+            where = _settings_change(settings.stored(), stored)
+            trends = tuple(_standing(t, o, where) for t, o in zip(trends, other, strict=True))
     return trends
 
 
-def _trends(history, runs, baseline_row, settings, alarms):
-    fits = history.diagnostic_fits(runs[0].machine_id, settings.key())
+def _trends(history, runs, fits, baseline_row, settings, alarms):
     valid = [r for r in runs if r.valid and r.id in fits]
     return tuple(
         _trend(history, d, valid, fits, baseline_row, settings, alarms)
@@ -143,8 +152,26 @@ def _trends(history, runs, baseline_row, settings, alarms):
     )
 
 
-def _standing(trend, other, motion):
-    """A diagnostic with no baseline, with the alarm standing on its fits under another motion."""
+def _settings_change(now, then):
+    """What other diagnostic settings fitted some nights, in a few words."""
+    said = []
+    if then.get("motion", "trajectory") != now.get("motion", "trajectory"):
+        said.append(f"the motion {then.get('motion', 'trajectory')!r}")
+    if then.get("software") != now.get("software"):
+        said.append(f"software {then.get('software')}")
+    if then.get("effects") != now.get("effects") or then.get("shapes") != now.get("shapes"):
+        said.append(
+            "other effects" if then.get("effects") != now.get("effects") else "other shapes"
+        )
+    return " and ".join(said) or "other settings"
+
+
+def _standing(trend, other, where):
+    """A diagnostic with no baseline, with the alarm standing on its fits under other settings.
+
+    The machine has not changed with the settings: the alarm stands until a new
+    baseline is set, its nights since it fired in alarm.
+    """
     from imu_square.monitor.verdict import iso
 
     if trend.baseline is not None or other.alarm_since_ns is None:
@@ -153,10 +180,16 @@ def _standing(trend, other, motion):
         return trend
     since = iso(other.alarm_since_ns)[:10]
     note = (
-        f"{trend.note}; its alarm on the fits with the motion {motion!r} stands since {since}, "
-        "until a new baseline is set"
+        f"{trend.note}; its alarm on the fits with {where} stands since {since}, until a new "
+        "baseline is set"
     )
-    return replace(trend, note=note, alarm_since_ns=other.alarm_since_ns)
+    nights = tuple(
+        replace(n, state="alarm") if (n.run.recorded_at_ns or 0) >= other.alarm_since_ns else n
+        for n in trend.nights
+    )
+    return replace(
+        trend, nights=nights, note=note, alarm_since_ns=other.alarm_since_ns, fired_on=where
+    )
 
 
 def _night(run, fit, name):
@@ -304,6 +337,12 @@ def alarm_clause(trends, run_id):
             if t.alarm_since_ns is not None and t.alarm_since_ns < (n.run.recorded_at_ns or 0):
                 since = iso(t.alarm_since_ns)[:10]
                 standing = f" (alarm since {since}, until a new baseline is set)"
+            if t.fired_on:  # no change under these settings: it stands on the others' fits
+                parts.append(
+                    f"{d.name} (alarm on the fits with {t.fired_on} since "
+                    f"{iso(t.alarm_since_ns)[:10]}, until a new baseline is set)"
+                )
+                continue
             parts.append(
                 f"{d.name} {n.change / d.scale:+.3g} ± {n.u_change / d.scale:.2g} {d.unit} since "
                 f"the baseline{standing}"

@@ -6,6 +6,7 @@ with the night's run in the same transaction, and never rewritten: a
 replay under other diagnostic settings adds fits beside the old ones.
 """
 
+import json
 from dataclasses import replace
 
 from imu_square.errors import HistoryError
@@ -88,6 +89,30 @@ class DiagnosticFits:
         for r in rows:
             by_fit.setdefault(r.fit_id, []).append(r)
         return {f.run_id: replace(f, values=tuple(by_fit.get(f.id, ()))) for f in fits}
+
+    def diagnostic_settings(self, machine_id):
+        """Every set of diagnostic settings a machine's fits were made under.
+
+        Parameters
+        ----------
+        machine_id : str
+            The machine.
+
+        Returns
+        -------
+        dict of str to dict
+            Settings hash to the settings (JSON values), oldest fit's first.
+        """
+        p = self._params()
+        sql = (
+            "SELECT diagnostic_fits.settings_hash, MIN(diagnostic_fits.settings_json), "
+            "MIN(diagnostic_fits.id) AS first_id FROM diagnostic_fits JOIN runs ON runs.id = "
+            f"diagnostic_fits.run_id WHERE runs.machine_id = {p(machine_id)} "
+            "GROUP BY diagnostic_fits.settings_hash ORDER BY first_id"
+        )
+        with self._read():
+            rows = self._conn.query(sql, p.values)
+        return {h: json.loads(text) for h, text, _ in rows}
 
     def _fits_of(self, machine_id, settings_hash, p):
         """The ids of a machine's fits under some settings, as a sub-query."""

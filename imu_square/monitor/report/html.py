@@ -164,6 +164,8 @@ def _diagnostics_html(assessment):
         alarm = "off" if t.step is None else "not judged"  # asked, but no design
         if t.design is not None:
             alarm = n.state if n is not None else ""
+        elif t.fired_on:  # standing on the fits under other settings
+            alarm = "alarm"
         # the note says why there is no baseline or alarm, whatever the alarm's state
         said = "; ".join(x for x in (alarm, t.note) if x)
         css = alarm if alarm in ("ok", "warning", "alarm") else ""
