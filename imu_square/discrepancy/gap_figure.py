@@ -80,10 +80,13 @@ def _residual_panels(axes, curves, left):
             label="transient windows, x and y",
         )
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    # the log axis starts at the lowest frequency drawn; a band from 0 Hz is shaded from it
+    lowest = min(f[1] if f.size > 1 else 1.0, ft[1] if ft.size > 1 else 1.0)
     for g in left:
         band = g.details.get("band")
         if band:
-            ax.axvspan(*band["band_hz"], color="r", alpha=0.1)
+            lo, hi = band["band_hz"]
+            ax.axvspan(max(lo, lowest), max(hi, lowest), color="r", alpha=0.1)
     ax.set_xscale("log")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("power / noise")
