@@ -282,6 +282,20 @@ def test_baseline_average_agrees_with_monte_carlo_and_converges():
     assert abs(per_path.mean() - 1 / avg["rate_arl"]) < 3 * se
 
 
+def test_a_chart_no_baseline_can_fire_averages_to_an_infinite_arl_without_a_warning():
+    # a limit of 60 sigmas: no baseline within 6 rho fires to double precision (a night's
+    # diagnostic whose uncertainty is tiny against its alarm's step); a divide by zero
+    # used to surface as "imu-square: warning: divide by zero" in the nightly run
+    import warnings
+
+    chart = Shewhart(60.0)
+    assert chart.arl(NORMAL.shifted(6 * 0.3)) == math.inf
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        avg = baseline_average(chart, NORMAL, 0.3)
+    assert avg["rate_arl"] == avg["mean_arl"] == math.inf
+
+
 def test_solved_limits_meet_the_baseline_averaged_rate_under_t():
     for chart in (Shewhart(1.0), Cusum(1.2, 1.0)):
         solved = solve_limit(chart, 500.0, T14, baseline_sd=0.3)

@@ -630,11 +630,9 @@ def baseline_average(chart, law, baseline_sd, nodes=_BASELINE_NODES):
     shifts, w = _baseline_nodes(baseline_sd, nodes, symmetric=law.shift == 0.0)
     arls = np.array([chart.arl(law.shifted(d)) for d in shifts])
     p10 = chart.arl(law.shifted(special.ndtri(0.95) * baseline_sd)) if law.shift == 0.0 else None
-    return {
-        "mean_arl": float(w @ arls),
-        "rate_arl": float(1.0 / (w @ (1.0 / arls))),
-        "p10_arl": p10,
-    }
+    with np.errstate(divide="ignore"):  # no baseline alarms to double precision: inf
+        rate_arl = float(1.0 / (w @ (1.0 / arls)))
+    return {"mean_arl": float(w @ arls), "rate_arl": rate_arl, "p10_arl": p10}
 
 
 def solve_limit(chart, arl0, law, baseline_sd=0.0, guess=None):
