@@ -20,7 +20,7 @@ from imu_square.discrepancy.localise import TRANSIENT_ZERO_PAD, residual_curves
 from imu_square.discrepancy.parameters import effect_model_parameters
 from imu_square.discrepancy.result import headline_is_honest
 from imu_square.discrepancy.selection import _shape_grid
-from imu_square.discrepancy.workflow import fit_base
+from imu_square.discrepancy.workflow import fit_base, steps_in_model
 from imu_square.io.mcap import read_mcap, write_mcap
 from imu_square.program import TestProgram
 from imu_square.simulate import (
@@ -544,3 +544,14 @@ def test_a_skewed_spike_centred_on_the_reversal_keeps_its_form():
     assert values["symmetric"].value == 0.0
     for name, truth in (("peak_x_m_s2", 4.39e-3), ("peak_y_m_s2", 5.94e-3)):
         assert abs(values[name].value - truth) < 3 * values[name].u_value, name
+
+
+def test_an_effect_dropped_and_added_again_is_named_once():
+    # on our own set a 10x spike was added, dropped by the Wald test beside a backlash and
+    # added again: the headline read "with reversal_spikes, backlash, reversal_spikes"
+    from types import SimpleNamespace
+
+    steps = [SimpleNamespace(effect=e) for e in ("reversal_spikes", "backlash", "reversal_spikes")]
+    kept = steps_in_model(steps, {"reversal_spikes", "backlash"})
+    assert kept == [steps[1], steps[2]]
+    assert steps_in_model(steps, {"backlash"}) == [steps[1]]

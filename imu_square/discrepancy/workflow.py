@@ -314,6 +314,27 @@ def fit_base(recording, program, analysis=None, lap=None, motion=None):
     return problem, base, params
 
 
+def steps_in_model(steps, active):
+    """The steps whose effect the final model holds, each effect's last step once.
+
+    An effect dropped by the Wald test can be added again at a later step;
+    only that step stands for it.
+
+    Parameters
+    ----------
+    steps : sequence of Step
+        Every step, in order.
+    active : set of str
+        The effects in the final model.
+
+    Returns
+    -------
+    list of Step
+    """
+    last = {s.effect: s for s in steps}
+    return [s for s in steps if s.effect in active and last[s.effect] is s]
+
+
 def _problem(recording, layout, motion):
     """The recording's features at a layout, their noise floor and the forward model."""
     operator = FeatureOperator(layout)
@@ -462,8 +483,7 @@ def find_discrepancy(recording, options=None, program=None, motion=None):
             max_steps=opts.max_steps,
         )
     lap("growth")
-    active = {p.effect for p in final.params} - {BASE}
-    steps_in = [s for s in steps if s.effect in active]
+    steps_in = steps_in_model(steps, {p.effect for p in final.params} - {BASE})
     final_gap = problem.gaps(final)
     notes = []
     state = _gauge(problem, final, steps_in)
