@@ -105,17 +105,42 @@ def stored_design(history, baseline_row, name, inputs):
     -------
     AlarmDesign
     """
-    from imu_square.monitor.stats.alarms import AlarmDesign
-
-    key = settings_hash(inputs)
-    kept = (baseline_row.diagnostic_designs or {}).get(name)
-    if kept and kept.get("key") == key:
-        return AlarmDesign.from_json_dict(kept["design"])
+    design = kept_design(baseline_row, name, inputs)
+    if design is not None:
+        return design
     design = design_diagnostic_alarm(inputs)
     designs = dict(baseline_row.diagnostic_designs or {})
-    designs[name] = {"key": key, "inputs": inputs, "design": design.to_json_dict()}
+    designs[name] = {
+        "key": settings_hash(inputs),
+        "inputs": inputs,
+        "design": design.to_json_dict(),
+    }
     history.set_diagnostic_designs(baseline_row.id, designs)
     return design
+
+
+def kept_design(baseline_row, name, inputs):
+    """A diagnostic's design kept with a baseline for these inputs, or None.
+
+    Parameters
+    ----------
+    baseline_row : BaselineRow
+        The baseline.
+    name : str
+        The diagnostic.
+    inputs : dict
+        :func:`design_inputs`.
+
+    Returns
+    -------
+    AlarmDesign or None
+    """
+    from imu_square.monitor.stats.alarms import AlarmDesign
+
+    kept = (baseline_row.diagnostic_designs or {}).get(name)
+    if kept and kept.get("key") == settings_hash(inputs):
+        return AlarmDesign.from_json_dict(kept["design"])
+    return None
 
 
 def describe(design, diagnostic):

@@ -20,7 +20,12 @@ from dataclasses import dataclass, replace
 
 from imu_square.errors import MonitorError
 from imu_square.log import logger
-from imu_square.monitor.diagnostics.alarms import describe, design_inputs, stored_design
+from imu_square.monitor.diagnostics.alarms import (
+    describe,
+    design_inputs,
+    kept_design,
+    stored_design,
+)
 from imu_square.monitor.diagnostics.baseline import MIN_NIGHTS, diagnostic_baseline
 from imu_square.units import URAD
 
@@ -138,13 +143,15 @@ def judge_diagnostics(history, runs, baseline_row, settings, alarms):
     for key, stored in history.diagnostic_settings(machine).items():
         if key != current:
             fits = history.diagnostic_fits(machine, key)
-            other = _trends(history, runs, fits, baseline_row, settings, alarms)
+            # judged on the design kept with the baseline only: reading them writes nothing
+            other = _trends(None, runs, fits, baseline_row, settings, alarms)
             where = _settings_change(settings.stored(), stored)
             trends = tuple(_standing(t, o, where) for t, o in zip(trends, other, strict=True))
     return trends
 
 
 def _trends(history, runs, fits, baseline_row, settings, alarms):
+    """Each diagnostic's trend on some fits (``history`` None: no design is made or kept)."""
     valid = [r for r in runs if r.valid and r.id in fits]
     return tuple(
         _trend(history, d, valid, fits, baseline_row, settings, alarms)
@@ -215,12 +222,11 @@ def _trend(history, diagnostic, runs, fits, baseline_row, settings, alarms):
     design, note = None, ""
     if step_si is not None:
         try:
-            design = stored_design(
-                history,
-                baseline_row,
-                diagnostic.name,
-                design_inputs(diagnostic, baseline, step_si, alarms),
-            )
+            inputs = design_inputs(diagnostic, baseline, step_si, alarms)
+            if history is None:
+                design = kept_design(baseline_row, diagnostic.name, inputs)
+            else:
+                design = stored_design(history, baseline_row, diagnostic.name, inputs)
         except MonitorError as exc:
             note = f"no alarm: {exc}"
             logger.warning("diagnostic %s: %s", diagnostic.name, note)
