@@ -488,8 +488,8 @@ def find_discrepancy(recording, options=None, program=None, motion=None):
     notes = []
     state = _gauge(problem, final, steps_in)
     reports = []
-    for s in steps:
-        upto = steps[: steps.index(s) + 1]
+    for k, s in enumerate(steps):
+        upto = steps[: k + 1]
         s_state = _gauge(
             problem, s.after, [u for u in upto if any(p.effect == u.effect for p in s.after.params)]
         )
