@@ -199,15 +199,7 @@ def test_a_diagnostic_alarm_stands_when_the_diagnostic_settings_change(grown, tm
     assert "stands since" not in standing["backlash_y"].note
     assert _alarm_cell(render_report(linuxcnc), "backlash_x") == f"alarm; {x.note}"
     # history under LinuxCNC's motion lists it with the alarms standing
-    lc = folder / "linuxcnc.toml"
-    lc.write_text(
-        (folder / "monitor.toml")
-        .read_text()
-        .replace("[program]\n", '[program]\nmotion = "linuxcnc"\n')
-    )
-    capsys.readouterr()
-    assert main(["history", "--config", str(lc)]) == 0
-    out = capsys.readouterr().out.splitlines()
+    out = _history_with_linuxcnc_motion(folder, capsys)
     assert f"diagnostic alarms standing: backlash_x since {since}" in out
     # a night judged with fewer effects (a new key, fitted tonight): in alarm in its record,
     # which the alerts read, and its verdict says on what fits
@@ -509,6 +501,19 @@ def unfitted(tmp_path_factory):
     return first, second
 
 
+def _history_with_linuxcnc_motion(folder, capsys):
+    """``imu-square history`` of a folder's monitor file, its motion LinuxCNC's: the lines."""
+    lc = folder / "linuxcnc.toml"
+    lc.write_text(
+        (folder / "monitor.toml")
+        .read_text()
+        .replace("[program]\n", '[program]\nmotion = "linuxcnc"\n')
+    )
+    capsys.readouterr()
+    assert main(["history", "--config", str(lc)]) == 0
+    return capsys.readouterr().out.splitlines()
+
+
 def _alarm_cell(report, name):
     """The alarm cell of a diagnostic's row in the report's diagnostics table, as text."""
     import html
@@ -546,15 +551,7 @@ def test_a_diagnostic_without_a_baseline_under_another_motion_says_why(unfitted,
     assert all(t.baseline is not None and t.note == "" for t in trajectory.diagnostics)
     assert _alarm_cell(render_report(trajectory), "backlash_y") == "off"
     # history, the monitor file's motion LinuxCNC's: every night and the baseline unfitted
-    lc = folder / "linuxcnc.toml"
-    lc.write_text(
-        (folder / "monitor.toml")
-        .read_text()
-        .replace("[program]\n", '[program]\nmotion = "linuxcnc"\n')
-    )
-    capsys.readouterr()
-    assert main(["history", "--config", str(lc)]) == 0
-    out = capsys.readouterr().out.splitlines()
+    out = _history_with_linuxcnc_motion(folder, capsys)
     assert (
         "4 judged night(s) have no diagnostic fit under these settings with the motion "
         "'linuxcnc' (runs 1, 2, 3, 4): replay their recordings ('imu-square replay') with them"
