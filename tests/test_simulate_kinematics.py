@@ -19,7 +19,7 @@ from numpy.testing import assert_allclose
 
 from imu_square.program import TestProgram
 from imu_square.simulate import MachineModel, chapman_machine, simulate_run
-from imu_square.simulate.drive import add_spikes
+from imu_square.simulate.drive import RAMP_RING_SIZED_AT_S, add_spikes, add_start_stop_vibration
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.kinematics import carriage_motion
 from imu_square.simulate.trajectory import build_timeline, ramp_fraction
@@ -288,10 +288,10 @@ def test_structural_mode_rung_at_the_corners_of_the_feed_ramps(size):
     period = 2 * math.pi / wd
 
     def response(u):
-        # acceleration of the mode rung with unit initial acceleration, u after the step
+        # acceleration of the mode rung with a unit size, u after the step: sized 30 ms on
         c, s = math.cos(wd * u), math.sin(wd * u)
         shape = sigma**2 + (wd**2 - sigma**2) * c - 2 * sigma * wd * s
-        return math.exp(-sigma * u) * shape / wd**2
+        return math.exp(-sigma * (u - RAMP_RING_SIZED_AT_S)) * shape / wd**2
 
     def rung_at(at):
         return (
@@ -322,17 +322,53 @@ def test_structural_mode_rung_at_the_corners_of_the_feed_ramps(size):
                 if tc <= tk
             )
             assert_allclose(rung_at(at), expected, rtol=1e-9, atol=1e-12)
-    # the first corner alone: the step's own initial acceleration, along the motion
+    # the first corner alone: the step's own initial acceleration, along the motion, is the
+    # size grown back over the 30 ms it is sized at (exp(0.05 * 2 pi 40 * 0.03) = 1.46)
     b = timeline.blocks[0]
     first = b.sign * np.array([-math.sin(b.start_angle_rad), math.cos(b.start_angle_rad)])
-    assert_allclose(rung_at(np.array([b.t_start_s]))[0], size * first, rtol=1e-9, atol=1e-12)
+    initial = size * math.exp(sigma * 0.03) * first
+    assert_allclose(rung_at(np.array([b.t_start_s]))[0], initial, rtol=1e-9, atol=1e-12)
 
 
 def test_block_edge_ringing_is_off_by_default_and_in_the_truth():
     assert MachineModel().vibration_start_stop_m_s2 == 0.0
+    assert MachineModel().vibration_start_stop_quadrature_m_s2 == 0.0
+    quadrature = MachineModel(vibration_start_stop_quadrature_m_s2=-0.01).effects()
+    assert quadrature["structural_vibration"]["start_stop_quadrature_m_s2"] == -0.01
     effects = MachineModel(vibration_start_stop_m_s2=0.01).effects()
     assert effects["structural_vibration"]["start_stop_m_s2"] == 0.01
     assert (
         "start_stop_m_s2"
         not in MachineModel(vibration_x_m_s2=0.01).effects()["structural_vibration"]
     )
+
+
+def test_the_quadrature_ringing_of_a_ramp_corner_starts_with_zero_acceleration():
+    # a smooth ramp's jerk step rings the mode a quarter period after an acceleration step
+    # would: zero acceleration at the corner, then Q e^(-sigma t) sin(omega_d t) along the step
+    hz, zeta, q = 80.0, 0.05, 0.02
+    wn = 2 * math.pi * hz
+    sigma, wd = zeta * wn, wn * math.sqrt(1 - zeta**2)
+    dt = 1e-6
+    t = dt * np.arange(-10_000, 1_500_000)  # t = 0 exactly
+    p = [np.zeros_like(t) for _ in range(3)]
+    add_start_stop_vibration(p, t, np.array([0.0]), np.array([-0.6]), 0.0, hz, zeta, q)
+    at = np.searchsorted(t, 0.0)
+    assert np.all(p[2][:at] == 0.0) and abs(p[2][at]) < 1e-12
+    # sized 30 ms on: the jerk at the corner is -0.6 Q omega_d exp(30 ms sigma) (a finite
+    # difference over 1 us: 0.5 % short)
+    grown = math.exp(sigma * 0.03)
+    assert_allclose((p[2][at + 1] - p[2][at]) / dt, -0.6 * q * grown * wd, rtol=5e-3)
+    # the path's derivatives are exact
+    assert_allclose(np.gradient(p[0], dt)[at + 5 : -5], p[1][at + 5 : -5], atol=1e-11)
+    assert_allclose(np.gradient(p[1], dt)[at + 5 : -5], p[2][at + 5 : -5], atol=1e-7)
+    # a quarter period on: the sine's crest, within 2 zeta (the non-oscillating part)
+    quarter = np.searchsorted(t, 0.25 / hz * math.sqrt(1 - zeta**2))
+    crest = -0.6 * q * grown * math.exp(-sigma * t[quarter])
+    assert_allclose(p[2][quarter], crest, rtol=2.5 * zeta)
+    # and it has died, position and all (the drifting omega_d t of the path too)
+    assert np.abs(p[0][t > 1.3]).max() < 1e-9 * q / wd**2
+    # its envelope is Q 30 ms on: the crest nearest 30 ms, decayed from there (within 2 zeta)
+    crest_t = (round(0.03 * wd / math.pi - 0.5) + 0.5) * math.pi / wd
+    expected = 0.6 * q * math.exp(-sigma * (crest_t - 0.03))
+    assert_allclose(abs(p[2][np.searchsorted(t, crest_t)]), expected, rtol=2.5 * zeta)

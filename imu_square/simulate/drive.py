@@ -42,6 +42,11 @@ _SYMMETRIC_WINDOW = 20.0  # either side of the centre: (1 + 2 s) exp(-2 s) < 1e-
 _VIBRATION_DECAY = 35.0
 
 
+# The ramps' ringing is sized this long after the corner, where a recording shows it (past
+# the ramp's own transient): sized at the corner, its size would trade against its damping.
+RAMP_RING_SIZED_AT_S = 0.03
+
+
 def _window(t, start, stop):
     return slice(*np.searchsorted(t, (start, stop), side="left"))
 
@@ -176,15 +181,24 @@ def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
         p[2][sl] += e * (sigma**2 + (wd**2 - sigma**2) * c - 2.0 * sigma * wd * s)
 
 
-def add_start_stop_vibration(p, t, times, components, accel_m_s2, frequency_hz, damping):
+def add_start_stop_vibration(
+    p, t, times, components, accel_m_s2, frequency_hz, damping, quadrature_m_s2=0.0
+):
     """Add the structural mode rung at the corners of the feed ramps, in place.
 
     The feed ramps step the acceleration along the direction of motion at
     their corners (up at the start of motion and at the end of the stop ramp,
     down at the end of the start ramp and at the start of the stop ramp); the
     mode answers each step with the reversal's oscillation
-    (:func:`add_vibration`), of initial acceleration ``accel_m_s2`` along the
-    step.
+    (:func:`add_vibration`) along the step. A smooth ramp (a jerk step, not an
+    acceleration step) rings the mode a quarter period later: its quadrature,
+    ``Q' exp(-sigma t') sin(omega_d t')`` in acceleration, from the position
+    ``(Q' / omega_d^2) exp(-sigma t') (omega_d t' - sin omega_d t')``, which
+    starts with zero position, velocity and acceleration and the jerk
+    ``Q' omega_d``. Together they ring at any phase (a controller's ramp has
+    its own shape and length). Both are sized :data:`RAMP_RING_SIZED_AT_S`
+    after the corner: ``Q' = Q exp(sigma RAMP_RING_SIZED_AT_S)``, and so for
+    the in-phase part.
 
     Parameters
     ----------
@@ -197,10 +211,31 @@ def add_start_stop_vibration(p, t, times, components, accel_m_s2, frequency_hz, 
     components : ndarray, shape (n_events,)
         This axis's component of the unit direction of the step at each.
     accel_m_s2 : float
-        Initial acceleration of the oscillation along the direction of motion. [m/s^2]
+        Amplitude of the in-phase (cosine) oscillation along the direction of
+        motion, :data:`RAMP_RING_SIZED_AT_S` after the corner. [m/s^2]
     frequency_hz : float
         Natural frequency. [Hz]
     damping : float
         Damping ratio, in (0, 1).
+    quadrature_m_s2 : float
+        ``Q``: amplitude of the quadrature (sine) oscillation along the step,
+        as long after the corner. [m/s^2]
     """
-    add_vibration(p, t, times, -np.asarray(components), accel_m_s2, frequency_hz, damping)
+    wn = 2.0 * np.pi * frequency_hz
+    sigma = damping * wn
+    grow = np.exp(sigma * RAMP_RING_SIZED_AT_S)
+    add_vibration(p, t, times, -np.asarray(components), grow * accel_m_s2, frequency_hz, damping)
+    if quadrature_m_s2 == 0:
+        return
+    wd = wn * np.sqrt(1.0 - damping**2)
+    amp = grow * quadrature_m_s2 / wd**2
+    for tk, ck in zip(times, components, strict=True):
+        sl = _window(t, tk, tk + _VIBRATION_DECAY / sigma)
+        tau = t[sl] - tk
+        e = ck * amp * np.exp(-sigma * tau)
+        g = wd * tau - np.sin(wd * tau)
+        dg = wd * (1.0 - np.cos(wd * tau))
+        ddg = wd**2 * np.sin(wd * tau)
+        p[0][sl] += e * g
+        p[1][sl] += e * (dg - sigma * g)
+        p[2][sl] += e * (ddg - 2.0 * sigma * dg + sigma**2 * g)

@@ -145,15 +145,23 @@ def ring_at_block_edges(p, timeline, t, axis, delays, machine):
     delays : list of tuple
         The servo's delay of each block span (:func:`servo_path`).
     machine : MachineModel
-        The machine (``vibration_start_stop_m_s2``, the mode's frequency and damping).
+        The machine (``vibration_start_stop_m_s2`` and its quadrature, the mode's
+        frequency and damping).
     """
     m = machine
-    if not m.vibration_start_stop_m_s2:
+    if not (m.vibration_start_stop_m_s2 or m.vibration_start_stop_quadrature_m_s2):
         return
     times, components = block_edges(timeline, axis)
     times = times + reversal_delays(times, delays)
     add_start_stop_vibration(
-        p, t, times, components, m.vibration_start_stop_m_s2, m.vibration_hz, m.vibration_damping
+        p,
+        t,
+        times,
+        components,
+        m.vibration_start_stop_m_s2,
+        m.vibration_hz,
+        m.vibration_damping,
+        m.vibration_start_stop_quadrature_m_s2,
     )
 
 

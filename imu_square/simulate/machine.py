@@ -49,7 +49,8 @@ A machine file (all sections optional; absent = ideal)::
     accel_y_m_s2 = 0.0
     frequency_hz = 40.0
     damping_ratio = 0.05
-    start_stop_m_s2 = 0.0         # the same mode rung at the corners of the feed ramps
+    start_stop_m_s2 = 0.0         # the same mode rung at the corners of the feed ramps (30 ms on)
+    start_stop_quadrature_m_s2 = 0.0  # ... a quarter period later (a smooth ramp's jerk)
 
     [gravity_coupling]            # carriage tilt leaking g*tilt into a channel
     x_per_x_urad_per_m = 0.0      # tilt seen by x per metre of X travel
@@ -120,9 +121,14 @@ class MachineModel:
     vibration_damping : float
         Damping ratio.
     vibration_start_stop_m_s2 : float
-        Initial acceleration of the same mode rung at each corner of the
-        feed ramps (where the acceleration steps), along the step (along the
-        direction of motion at the start and the end of motion); signed. [m/s^2]
+        Amplitude of the same mode rung at each corner of the feed ramps
+        (where the acceleration steps), along the step (along the direction
+        of motion at the start and the end of motion), 30 ms after the corner
+        (:data:`~imu_square.simulate.drive.RAMP_RING_SIZED_AT_S`); signed. [m/s^2]
+    vibration_start_stop_quadrature_m_s2 : float
+        Amplitude of its quadrature, the ringing a smooth ramp's jerk step
+        starts (zero acceleration at the corner, a sine along the step), as
+        long after the corner; signed. [m/s^2]
     tilt_per_m : tuple of 4 float
         Gravity coupling: tilt seen by the x channel per metre of X and of Y
         travel, then by the y channel per metre of X and of Y. [rad/m]
@@ -149,6 +155,7 @@ class MachineModel:
     vibration_hz: float = 40.0
     vibration_damping: float = 0.05
     vibration_start_stop_m_s2: float = 0.0
+    vibration_start_stop_quadrature_m_s2: float = 0.0
     tilt_per_m: tuple = (0.0, 0.0, 0.0, 0.0)
 
     def effects(self):
@@ -197,7 +204,13 @@ class MachineModel:
             }
             if self.spike_symmetric:  # only then: the skewed form's truth is as it was
                 out["reversal_spikes"]["symmetric"] = True
-        if self.vibration_x_m_s2 or self.vibration_y_m_s2 or self.vibration_start_stop_m_s2:
+        quadrature = self.vibration_start_stop_quadrature_m_s2
+        if (
+            self.vibration_x_m_s2
+            or self.vibration_y_m_s2
+            or self.vibration_start_stop_m_s2
+            or quadrature
+        ):
             out["structural_vibration"] = {
                 "accel_x_m_s2": self.vibration_x_m_s2,
                 "accel_y_m_s2": self.vibration_y_m_s2,
@@ -206,6 +219,8 @@ class MachineModel:
             }
             if self.vibration_start_stop_m_s2:
                 out["structural_vibration"]["start_stop_m_s2"] = self.vibration_start_stop_m_s2
+            if quadrature:
+                out["structural_vibration"]["start_stop_quadrature_m_s2"] = quadrature
         if any(self.tilt_per_m):
             out["gravity_coupling"] = dict(
                 zip(
@@ -252,6 +267,7 @@ _LAYOUT = {
         "frequency_hz": 40.0,
         "damping_ratio": 0.05,
         "start_stop_m_s2": 0.0,
+        "start_stop_quadrature_m_s2": 0.0,
     },
     "gravity_coupling": {
         "x_per_x_urad_per_m": 0.0,
@@ -348,6 +364,9 @@ def machine_from_mapping(doc, source="<machine>"):
         vibration_hz=vibration.number("frequency_hz", 0.0, 1e4, lo_open=True),
         vibration_damping=vibration.number("damping_ratio", 0.0, 1.0, lo_open=True, hi_open=True),
         vibration_start_stop_m_s2=vibration.number("start_stop_m_s2", -100.0, 100.0),
+        vibration_start_stop_quadrature_m_s2=vibration.number(
+            "start_stop_quadrature_m_s2", -100.0, 100.0
+        ),
         tilt_per_m=tilt,
     )
 

@@ -79,6 +79,7 @@ def axis_parameters(machine, axis):
         m.vibration_hz,
         m.vibration_damping,
         m.vibration_start_stop_m_s2,
+        m.vibration_start_stop_quadrature_m_s2,
     )
 
 

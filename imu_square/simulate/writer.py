@@ -100,6 +100,7 @@ def machine_to_toml(machine, header=""):
                 "accel_x_m_s2": m.vibration_x_m_s2,
                 "accel_y_m_s2": m.vibration_y_m_s2,
                 "start_stop_m_s2": m.vibration_start_stop_m_s2,
+                "start_stop_quadrature_m_s2": m.vibration_start_stop_quadrature_m_s2,
                 "frequency_hz": m.vibration_hz,
                 "damping_ratio": m.vibration_damping,
             },
