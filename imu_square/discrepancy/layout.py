@@ -30,7 +30,7 @@ REVERSAL_AFTER_S = 0.25
 REVERSAL_BIN_S = 0.005
 # Length of each transient window and its bins. [s]
 TRANSIENT_WINDOW_S = 0.25
-TRANSIENT_BIN_S = 0.005
+TRANSIENT_BIN_S = 0.002
 # The motion midpoint's uncertainty is never taken below this (a tenth of a 1 kHz sample). [s]
 MIN_U_T_MID_S = 1e-5
 

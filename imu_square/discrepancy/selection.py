@@ -213,12 +213,27 @@ class Screener:
         screen.p_adjusted = min(1.0, screen.p_value * screen.grid_size)
 
     def _directions(self, state, params, shape):
+        """Fit-vector directions of a shape: one per size.
+
+        The channel split of one run tells an x size from a y size; an effect
+        with more sizes than channels runs each on its own (set together, the
+        sizes would be scored in one fixed ratio: a ringing's in-phase and
+        quadrature sizes at one phase, whose likelihood then peaks in frequency
+        narrower than the grid).
+        """
         sizes = [p for p in params if p.role == SIZE]
         s = _with_shape(state, params, shape)
-        for p in sizes:
-            s = p.set(s, 0.1 * p.declared.typical if p.declared.typical else p.step)
-        v = self.problem.space.fit_vector(self.problem.change(state, s))
-        return np.column_stack([v * self.channel[0], v * self.channel[1]])
+
+        def run(group):
+            end = s
+            for p in group:
+                end = p.set(end, 0.1 * p.declared.typical if p.declared.typical else p.step)
+            return self.problem.space.fit_vector(self.problem.change(state, end))
+
+        if len(sizes) <= 2:
+            v = run(sizes)
+            return np.column_stack([v * self.channel[0], v * self.channel[1]])
+        return np.column_stack([run([p]) for p in sizes])
 
     def _stage2(self, screen, outcome, params, q):
         problem = self.problem
@@ -440,6 +455,10 @@ def _trial(problem, outcome, screen, first):
         other, _ = _refit(problem, outcome, replace(screen, shape=form), starts)
         if other.rss < fit.rss:
             fit, screen.shape = other, form
+    if fit.rss > outcome.rss:
+        # started outside the linear region (a servo lag added moves a ringing already in
+        # the model by a good part of its period): from the model itself, to convergence
+        fit, _ = _refit(problem, outcome, screen, [np.zeros(len(screen.informative))], None)
     lr = outcome.rss - fit.rss
     return _p_adjusted(fit, screen, lr), -lr, fit, shapes
 

@@ -428,6 +428,20 @@ EFFECT_PARAMETERS = {
             "machine",
             "vibration_start_stop_m_s2",
         ),
+        # ... and its quadrature: the ringing's phase after a ramp depends on the ramp's
+        # shape and length, which differ from controller to controller
+        _p(
+            "structural_vibration",
+            "start_stop_quadrature_m_s2",
+            "m/s²",
+            1.0,
+            -1.0,
+            1.0,
+            0.0,
+            SIZE,
+            "machine",
+            "vibration_start_stop_quadrature_m_s2",
+        ),
         _p(
             "structural_vibration",
             "frequency_hz",

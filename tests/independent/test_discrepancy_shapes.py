@@ -198,6 +198,28 @@ def test_a_mode_rung_by_the_feed_ramps_is_named():
     assert values["structural_vibration.frequency_hz"] == pytest.approx(41.0, rel=0.02)
 
 
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("zeta, participation", [(0.03, 3.3), (0.08, 6.3)])
+def test_a_mode_rung_by_the_feed_ramps_at_80_hz_is_named_with_its_frequency(
+    seed, zeta, participation
+):
+    # At 80 Hz, 1 / (zeta omega) = 20-66 ms; the ringing's phase after the generator's
+    # raised-cosine ramps is not that of our trapezoid's corners, and with the phase fixed
+    # by them the likelihood peaked in frequency narrower than the 12 % grid: fitted 69 or
+    # 83 Hz with a gap left, or not named (2 to 5 of 6 on the benchmark). Both phases are
+    # fitted now. Each case is 3.2 times its detection limit here (a participation of
+    # 1.0-1.04 at zeta = 0.03, 1.78-2.07 at 0.08, on these seeds: benchmarks/
+    # discrepancy_independent.py's definition).
+    mode = {"freq_hz": 80.0, "zeta": zeta, "participation": participation}
+    result, named = _run({"mode_x": mode, "mode_y": dict(mode)}, seed=seed, sensor=SENSOR_500)
+    assert named == {"structural_vibration"} and result.explained, result.headline()
+    fitted = {v.name: v for v in result.model}
+    hz = fitted["structural_vibration.frequency_hz"]
+    damping = fitted["structural_vibration.damping_ratio"]
+    assert hz.value == pytest.approx(80.0, abs=4 * hz.u_value)
+    assert damping.value == pytest.approx(zeta, abs=4 * damping.u_value)
+
+
 @pytest.mark.parametrize("ramp_s, shape", [(0.6, "cosine"), (1.0, "constant_accel")])
 def test_a_controllers_long_feed_ramp_leaves_no_gap_at_block_starts(ramp_s, shape):
     # the model ramps in 0.15 s: a ramp four to seven times longer still runs when the
@@ -247,7 +269,8 @@ def test_a_strong_ringing_does_not_move_its_own_transient_window(participation):
     assert rung.size == clean.size == 2 * SHORT.n_blocks  # after each start and each end
     lead = (clean - rung) / SENSOR_500["rate_hz"]  # [s]
     assert (lead >= 0).all() and (lead <= RUN_S + 0.5 / 80.0 + 0.009).all(), lead
-    # and the mode is named (its frequency, at one scan step from a grid point, is not
-    # always found: 69 or 83 Hz on some seeds, with a gap left in the headline)
+    # and the mode is named, with its frequency
     result, named = _run({"mode_x": mode, "mode_y": dict(mode)}, seed=3, sensor=SENSOR_500)
     assert "structural_vibration" in named, result.headline()
+    hz = next(v for v in result.model if v.name == "structural_vibration.frequency_hz")
+    assert hz.value == pytest.approx(80.0, abs=max(4 * hz.u_value, 0.8))
