@@ -15,8 +15,8 @@ cycles is the block's cycle-averaged trace; the offset and the circle
 harmonic (``k = 0, 1``) are also kept per cycle, for the trend and the timing
 across cycles. The samples within a window around each axis reversal are
 summed in 5 ms bins (:mod:`imu_square.discrepancy.layout`) for the reversal
-view, and so are the transient samples after each block's start ramp and end
-of motion, over the blocks of a direction, for the transient view.
+view, and the transient samples after each block's start ramp and end of
+motion in 2 ms bins, over the blocks of a direction, for the transient view.
 
 All of it is linear in the samples, so the features of ``data - model`` are
 those of the data minus those of the model: both go through the same

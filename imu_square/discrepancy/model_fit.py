@@ -18,6 +18,8 @@ from imu_square.log import logger
 
 # Residual samples are held within this many standard deviations of the white noise.
 CLIP_SIGMA = 4.0
+# Most evaluations of the residual a fit takes (the fit "to convergence" of the workflow).
+FIT_NFEV = 12
 
 
 @dataclass(frozen=True)
@@ -157,7 +159,7 @@ class Problem:
             out.append(self.change(state, p.set(state, v + h)).scaled(1.0 / h))
         return out
 
-    def fit(self, state, params, max_nfev=12):
+    def fit(self, state, params, max_nfev=FIT_NFEV):
         """Least-squares fit of ``params`` starting from ``state``.
 
         Parameters

@@ -5,7 +5,8 @@ Each step:
 1. *Screen* every candidate not yet in the model at the current fit. For an
    effect with shape parameters (a time constant, a frequency, a flag) its
    declared ``scan`` values are tried first: one simulator run per grid
-   point, scored by the likelihood ratio of its x and y parts. At the best
+   point, scored by the likelihood ratio of its x and y parts (an effect
+   with more sizes than the two channels: one run per size). At the best
    grid point the derivative by each size parameter is taken (a finite
    difference of the simulator). Sizes whose whole physical range moves the
    fit vector by less than one standard deviation beyond what the current
@@ -49,6 +50,7 @@ import numpy as np
 from scipy import linalg, stats
 
 from imu_square.discrepancy.features import NYQUIST_FRACTION, Features
+from imu_square.discrepancy.model_fit import FIT_NFEV
 from imu_square.discrepancy.parameters import effect_model_parameters
 from imu_square.log import logger
 from imu_square.simulate.effects import SHAPE, SIZE
@@ -213,7 +215,7 @@ class Screener:
         screen.p_adjusted = min(1.0, screen.p_value * screen.grid_size)
 
     def _directions(self, state, params, shape):
-        """Fit-vector directions of a shape: one per size.
+        """Fit-vector directions of a shape, one per size (or per channel).
 
         The channel split of one run tells an x size from a y size; an effect
         with more sizes than channels runs each on its own (set together, the
@@ -458,7 +460,7 @@ def _trial(problem, outcome, screen, first):
     if fit.rss > outcome.rss:
         # started outside the linear region (a servo lag added moves a ringing already in
         # the model by a good part of its period): from the model itself, to convergence
-        fit, _ = _refit(problem, outcome, screen, [np.zeros(len(screen.informative))], None)
+        fit, _ = _refit(problem, outcome, screen, [np.zeros(len(screen.informative))], FIT_NFEV)
     lr = outcome.rss - fit.rss
     return _p_adjusted(fit, screen, lr), -lr, fit, shapes
 

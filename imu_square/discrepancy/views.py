@@ -33,7 +33,7 @@ harmonic of the pipeline's 4 Hz low-pass, at least 10):
 ``transients``
     The residual samples in the windows after each block's start ramp and
     after its end of motion (:mod:`imu_square.discrepancy.layout`: the ramps
-    themselves are left out), summed in 5 ms bins over the blocks of a
+    themselves are left out), summed in 2 ms bins over the blocks of a
     direction (a mode rung at block starts and stops).
 ``trend``
     Each cycle's offset and circle harmonic (three numbers per axis) of the
