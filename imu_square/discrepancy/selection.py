@@ -457,10 +457,19 @@ def _trial(problem, outcome, screen, first):
         other, _ = _refit(problem, outcome, replace(screen, shape=form), starts)
         if other.rss < fit.rss:
             fit, screen.shape = other, form
-    if fit.rss > outcome.rss:
-        # started outside the linear region (a servo lag added moves a ringing already in
-        # the model by a good part of its period): from the model itself, to convergence
-        fit, _ = _refit(problem, outcome, screen, [np.zeros(len(screen.informative))], FIT_NFEV)
+    lr = outcome.rss - fit.rss
+    return _p_adjusted(fit, screen, lr), -lr, fit, shapes
+
+
+def _trial_from_model(problem, outcome, screen):
+    """A trial refitted from the model itself (its sizes zero), to convergence.
+
+    For a trial whose linearised start lay outside the linear region, so that
+    it ended worse than the model it extends: a servo lag added moves a
+    ringing already in the model by a good part of its period.
+    """
+    start = [np.zeros(len(screen.informative))]
+    fit, shapes = _refit(problem, outcome, screen, start, FIT_NFEV)
     lr = outcome.rss - fit.rss
     return _p_adjusted(fit, screen, lr), -lr, fit, shapes
 
@@ -582,6 +591,12 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         trials = {}
         for e in promising:
             trials[e] = _trial(problem, outcome, screens[e], first[e])
+        # a trial that ended worse than its model, whose screening promised more than the
+        # best trial realised, could be the step: refitted from the model (it costs a fit)
+        realised = max(-t[1] for t in trials.values())
+        for e in promising:
+            if trials[e][1] > 0 and screens[e].lr > realised:
+                trials[e] = _trial_from_model(problem, outcome, screens[e])
         best = min(trials, key=lambda e: trials[e][:2])
         p_adj, neg_lr, new, shapes = trials[best]
         lr = -neg_lr
