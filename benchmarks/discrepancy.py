@@ -103,15 +103,27 @@ def paper_sensor():
 
 # Sizes whose preset is off, drawn at this magnitude (display units).
 _OFF_IN_PRESET = {("structural_vibration", "start_stop_m_s2"): 0.01}
+# ... drawn from a stream of their own, so that adding them left every other draw of
+# the held-out set as it was (the ramp ringing's quadrature, df58854).
+_OWN_STREAM = {("structural_vibration", "start_stop_quadrature_m_s2"): 0.01}
 # Where the structural mode is rung: at the reversals, at the feed ramps' corners, or both.
-_RUNG = (("start_stop_m_s2",), ("accel_x_m_s2", "accel_y_m_s2"), ())
+_RUNG = (
+    ("start_stop_m_s2", "start_stop_quadrature_m_s2"),
+    ("accel_x_m_s2", "accel_y_m_s2"),
+    (),
+)
 
 
 def draw_direction(effect, rng):
     """Size parameters (display units) of a random direction, and the shapes."""
     sizes, shapes = {}, {}
+    own = np.random.default_rng(rng.bit_generator.seed_seq.spawn(1)[0])
     for p in effect_parameters(effect):
         if p.role == SHAPE:
+            continue
+        if (effect, p.name) in _OWN_STREAM:
+            magnitude = _OWN_STREAM[effect, p.name] * own.uniform(0.5, 1.5)
+            sizes[p.name] = magnitude * own.choice((-1.0, 1.0))
             continue
         typical = p.typical if p.typical else _OFF_IN_PRESET.get((effect, p.name), 0.0)
         if effect == "gravity_coupling":

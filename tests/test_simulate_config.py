@@ -53,6 +53,28 @@ def test_unknown_data_file():
         data_path("nope")
 
 
+@pytest.mark.parametrize(
+    "in_phase, quadrature, damping, refused",
+    [(0.01, 0.0, 0.26, False), (0.0, 0.02, 0.27, True), (0.0, 0.0, 0.9, False)],
+)
+def test_a_ramp_ringing_that_dies_before_it_is_sized_is_refused(
+    tmp_path, in_phase, quadrature, damping, refused
+):
+    # sized 30 ms after the corner: at 1 kHz a damping of 0.265 decays e^50 by then, and
+    # the ringing would start e^50 larger (inf beyond e^709); without it, any damping reads
+    path = tmp_path / "m.toml"
+    path.write_text(
+        f"[structural_vibration]\nstart_stop_m_s2 = {in_phase}\n"
+        f"start_stop_quadrature_m_s2 = {quadrature}\n"
+        f"frequency_hz = 1000.0\ndamping_ratio = {damping}\n"
+    )
+    if refused:
+        with pytest.raises(ConfigError, match=r"damping_ratio must be below 0.265 with the feed"):
+            read_machine(path)
+    else:
+        assert read_machine(path).vibration_damping == damping
+
+
 def test_machine_file_units(tmp_path):
     path = tmp_path / "m.toml"
     path.write_text(

@@ -104,7 +104,7 @@ class Screen:
     coef, cov : ndarray
         Linearised estimates of the identifiable sizes and their covariance. [display units]
     grid : list
-        ``(shape dict, fit-vector directions split by channel)`` of every grid point run.
+        ``(shape dict, fit-vector directions)`` of every grid point run (:meth:`_directions`).
     inert : set of str
         Keys of the sizes not identifiable at the first screening.
     forms : list of dict
@@ -289,7 +289,7 @@ class Screener:
         return [(grid[i], scored[i][0]) for i in sorted(scored)]
 
     def screen(self, effect, outcome):
-        """Screen one candidate at a fitted model (simulator runs: grid + sizes).
+        """Screen one candidate at a fitted model (simulator runs: grid (x sizes if > 2), sizes).
 
         Parameters
         ----------
@@ -461,6 +461,13 @@ def _trial(problem, outcome, screen, first):
     return _p_adjusted(fit, screen, lr), -lr, fit, shapes
 
 
+def _converged(problem, outcome, screen, trial):
+    """A trial refitted to convergence from where it ended."""
+    fit = problem.fit(trial[2].state, trial[2].params)
+    lr = outcome.rss - fit.rss
+    return _p_adjusted(fit, screen, lr), -lr, fit, trial[3]
+
+
 def _trial_from_model(problem, outcome, screen):
     """A trial refitted from the model itself (its sizes zero), to convergence.
 
@@ -592,11 +599,16 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         for e in promising:
             trials[e] = _trial(problem, outcome, screens[e], first[e])
         # a trial that ended worse than its model, whose screening promised more than the
-        # best trial realised, could be the step: refitted from the model (it costs a fit)
+        # best trial realised, could be the step: refitted from the model to convergence,
+        # and then the others too, so that converged fits are compared (it costs fits)
         realised = max(-t[1] for t in trials.values())
-        for e in promising:
-            if trials[e][1] > 0 and screens[e].lr > realised:
-                trials[e] = _trial_from_model(problem, outcome, screens[e])
+        rescued = [e for e in promising if trials[e][1] > 0 and screens[e].lr > realised]
+        if rescued:
+            for e in promising:
+                if e in rescued:
+                    trials[e] = _trial_from_model(problem, outcome, screens[e])
+                else:
+                    trials[e] = _converged(problem, outcome, screens[e], trials[e])
         best = min(trials, key=lambda e: trials[e][:2])
         p_adj, neg_lr, new, shapes = trials[best]
         lr = -neg_lr

@@ -147,7 +147,7 @@ def _add_symmetric_spikes(p, t, times, directions, peak_m_s2, tau_s, centre):
         p[2][sl] += a * (-sech2 * (1.0 - 2.0 * s * th))
 
 
-def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
+def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping, sized_at_s=0.0):
     """Add a damped oscillation of the axis excited at each reversal, in place.
 
     Parameters
@@ -159,11 +159,13 @@ def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
     times, directions : ndarray
         Reversal times [s] and the direction after each.
     accel_m_s2 : float
-        Initial acceleration amplitude ``D omega_d^2``. [m/s^2]
+        Acceleration amplitude ``D omega_d^2``, ``sized_at_s`` after the excitation. [m/s^2]
     frequency_hz : float
         Natural frequency. [Hz]
     damping : float
         Damping ratio, in (0, 1).
+    sized_at_s : float
+        When the amplitude is taken (0: the initial acceleration). [s]
     """
     if accel_m_s2 == 0:
         return
@@ -174,7 +176,7 @@ def add_vibration(p, t, times, directions, accel_m_s2, frequency_hz, damping):
     for tk, dk in zip(times, directions, strict=True):
         sl = _window(t, tk, tk + _VIBRATION_DECAY / sigma)
         tau = t[sl] - tk
-        e = -dk * amp * np.exp(-sigma * tau)
+        e = -dk * amp * np.exp(-sigma * (tau - sized_at_s))
         c, s = np.cos(wd * tau), np.sin(wd * tau)
         p[0][sl] += e * (1.0 - c)
         p[1][sl] += e * (-sigma + sigma * c + wd * s)
@@ -190,15 +192,17 @@ def add_start_stop_vibration(
     their corners (up at the start of motion and at the end of the stop ramp,
     down at the end of the start ramp and at the start of the stop ramp); the
     mode answers each step with the reversal's oscillation
-    (:func:`add_vibration`) along the step. A smooth ramp (a jerk step, not an
-    acceleration step) rings the mode a quarter period later: its quadrature,
-    ``Q' exp(-sigma t') sin(omega_d t')`` in acceleration, from the position
+    (:func:`add_vibration`) along the step. A ramp of constant jerk rings it
+    a quarter period later: the quadrature, from the position
     ``(Q' / omega_d^2) exp(-sigma t') (omega_d t' - sin omega_d t')``, which
     starts with zero position, velocity and acceleration and the jerk
-    ``Q' omega_d``. Together they ring at any phase (a controller's ramp has
-    its own shape and length). Both are sized :data:`RAMP_RING_SIZED_AT_S`
-    after the corner: ``Q' = Q exp(sigma RAMP_RING_SIZED_AT_S)``, and so for
-    the in-phase part.
+    ``Q' omega_d``; its acceleration is ``Q' exp(-sigma t') sin(omega_d t')``
+    to within a part that does not oscillate, of order ``2 zeta Q'`` (the
+    price of a position that comes back to rest). Together the two ring at
+    any phase: a controller's ramp, of its own shape and length, rings the
+    mode at its own. Both are sized :data:`RAMP_RING_SIZED_AT_S` after the
+    corner: ``Q' = Q exp(sigma RAMP_RING_SIZED_AT_S)``, and so for the
+    in-phase part.
 
     Parameters
     ----------
@@ -221,18 +225,18 @@ def add_start_stop_vibration(
         ``Q``: amplitude of the quadrature (sine) oscillation along the step,
         as long after the corner. [m/s^2]
     """
-    wn = 2.0 * np.pi * frequency_hz
-    sigma = damping * wn
-    grow = np.exp(sigma * RAMP_RING_SIZED_AT_S)
-    add_vibration(p, t, times, -np.asarray(components), grow * accel_m_s2, frequency_hz, damping)
+    at = RAMP_RING_SIZED_AT_S
+    add_vibration(p, t, times, -np.asarray(components), accel_m_s2, frequency_hz, damping, at)
     if quadrature_m_s2 == 0:
         return
+    wn = 2.0 * np.pi * frequency_hz
+    sigma = damping * wn
     wd = wn * np.sqrt(1.0 - damping**2)
-    amp = grow * quadrature_m_s2 / wd**2
+    amp = quadrature_m_s2 / wd**2
     for tk, ck in zip(times, components, strict=True):
         sl = _window(t, tk, tk + _VIBRATION_DECAY / sigma)
         tau = t[sl] - tk
-        e = ck * amp * np.exp(-sigma * tau)
+        e = ck * amp * np.exp(-sigma * (tau - at))
         g = wd * tau - np.sin(wd * tau)
         dg = wd * (1.0 - np.cos(wd * tau))
         ddg = wd**2 * np.sin(wd * tau)

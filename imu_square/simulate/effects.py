@@ -415,7 +415,8 @@ EFFECT_PARAMETERS = {
             "machine",
             "vibration_y_m_s2",
         ),
-        # the same mode rung at each block's start and end of motion, along the motion
+        # the same mode rung at each block's start and end of motion, along the motion,
+        # sized 30 ms after the ramp's corner (drive.RAMP_RING_SIZED_AT_S)
         _p(
             "structural_vibration",
             "start_stop_m_s2",

@@ -59,16 +59,21 @@ A machine file (all sections optional; absent = ideal)::
     y_per_y_urad_per_m = 0.0
 """
 
+import math
 import warnings
 from dataclasses import dataclass, field
 
 from imu_square.errors import ConfigError, ImuSquareWarning
+from imu_square.simulate.drive import RAMP_RING_SIZED_AT_S
 from imu_square.simulate.geometry import Geometry
 from imu_square.simulate.kinematics import SERVO_MODELS
 from imu_square.simulate.trajectory import RAMP_PROFILES
 from imu_square.textfile import read_toml
 from imu_square.units import HOUR, MS, UM
 from imu_square.validation import read_tables
+
+# The most a mode rung by the feed ramps may decay, in e-folds, by when it is sized.
+_MAX_RING_DECAY = 50.0
 
 
 @dataclass(frozen=True)
@@ -342,7 +347,7 @@ def machine_from_mapping(doc, source="<machine>"):
     tilt = tuple(
         t["gravity_coupling"].number(key, -big, big) * UM for key in _LAYOUT["gravity_coupling"]
     )
-    return MachineModel(
+    model = MachineModel(
         name=machine.text("name"),
         geometry=geometry,
         ramp_s=machine.number("ramp_s", 0.0, 5.0, lo_open=True),
@@ -369,6 +374,17 @@ def machine_from_mapping(doc, source="<machine>"):
         ),
         tilt_per_m=tilt,
     )
+    rung = model.vibration_start_stop_m_s2 or model.vibration_start_stop_quadrature_m_s2
+    e_folds_per_damping = 2.0 * math.pi * model.vibration_hz * RAMP_RING_SIZED_AT_S
+    if rung and model.vibration_damping * e_folds_per_damping > _MAX_RING_DECAY:
+        # sized 30 ms after the corner, it would start e^50 or more larger
+        vibration.fail(
+            "damping_ratio",
+            f"below {_MAX_RING_DECAY / e_folds_per_damping:.3g} with the feed ramps' ringing on"
+            " (its size is taken 30 ms after the corner)",
+            model.vibration_damping,
+        )
+    return model
 
 
 def read_machine(path):

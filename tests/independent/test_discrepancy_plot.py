@@ -23,7 +23,8 @@ MODE_HZ, ZETA = 80.0, 0.05
 
 
 def test_a_ringing_at_block_starts_is_located_in_time_and_frequency(tmp_path, capsys):
-    # participation 10 rings about 4 mm/s^2 at the windows' start, four times a bin's noise
+    # participation 10 rings about 4 mm/s^2 at the windows' start, 2.5 times the noise of a
+    # 2 ms bin (one sample at 500 Hz)
     mode = {"freq_hz": MODE_HZ, "zeta": ZETA, "participation": 10.0}
     rec, _ = generate(SHORT, {"mode_x": mode, "mode_y": dict(mode)}, SENSOR_500, seed=2)
     path, plot = tmp_path / "ring.mcap", tmp_path / "gaps.png"
@@ -36,9 +37,9 @@ def test_a_ringing_at_block_starts_is_located_in_time_and_frequency(tmp_path, ca
     assert "transients" in left, doc["headline"]
     gap = left["transients"]
     # a ringing decays by exp(-2 pi zeta) = 0.73 a period: its largest bin is within its
-    # first two periods from the window's start (noise of a bin is a quarter of the peak)
+    # first two periods from the window's start (noise of a bin is 0.4 of the peak)
     assert gap["transient"]["time_into_window_ms"] <= (2 / MODE_HZ + TRANSIENT_BIN_S) * 1e3
-    # the periodogram of 0.25 s windows resolves 1 / 0.25 s = 4 Hz; noise-free, the 5 ms bin
+    # the periodogram of 0.25 s windows resolves 1 / 0.25 s = 4 Hz; noise-free, the 2 ms bin
     # means of the damped ringing (f sqrt(1 - zeta^2) = 79.9 Hz) peak within 0.5 Hz of it,
     # whatever its phase and the windows' start
     resolution = 1.0 / TRANSIENT_WINDOW_S

@@ -192,10 +192,15 @@ def test_a_mode_rung_by_the_feed_ramps_is_named():
     mode = {"freq_hz": 41.0, "zeta": 0.05, "participation": 0.8}
     result, named = _run({"mode_x": mode, "mode_y": dict(mode)})
     assert "structural_vibration" in named, result.headline()
-    values = {v.name: v.value for v in result.model}
-    assert values["structural_vibration.start_stop_m_s2"] != 0.0
+    fitted = {v.name: v for v in result.model}
+    # the ringing after the ramps, at whatever phase: its amplitude is far from zero
+    in_phase = fitted["structural_vibration.start_stop_m_s2"]
+    quadrature = fitted["structural_vibration.start_stop_quadrature_m_s2"]
+    amplitude = math.hypot(in_phase.value, quadrature.value)
+    assert amplitude > 4 * max(in_phase.u_value, quadrature.u_value)
     # the windows hold about ten periods: 2 % of frequency is a fifth of a period at their end
-    assert values["structural_vibration.frequency_hz"] == pytest.approx(41.0, rel=0.02)
+    hz = fitted["structural_vibration.frequency_hz"].value
+    assert hz == pytest.approx(41.0, rel=0.02)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -207,7 +212,7 @@ def test_a_mode_rung_by_the_feed_ramps_at_80_hz_is_named_with_its_frequency(
     # raised-cosine ramps is not that of our trapezoid's corners, and with the phase fixed
     # by them the likelihood peaked in frequency narrower than the 12 % grid: fitted 69 or
     # 83 Hz with a gap left, or not named (2 to 5 of 6 on the benchmark). Both phases are
-    # fitted now. Each case is 3.2 times its detection limit here (a participation of
+    # fitted now. Each case is 3.0-3.5 times its detection limit here (a participation of
     # 1.0-1.04 at zeta = 0.03, 1.78-2.07 at 0.08, on these seeds: benchmarks/
     # discrepancy_independent.py's definition).
     mode = {"freq_hz": 80.0, "zeta": zeta, "participation": participation}

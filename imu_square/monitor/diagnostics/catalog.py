@@ -19,7 +19,10 @@ file names a diagnostic's alarm by its name and that unit's suffix
   the scale's *change* is the machine's, like the squareness's.
 
 Ballbar diagnostics without an effect in the vocabulary (cyclic error,
-lateral play, stick-slip) are not here.
+lateral play, stick-slip) are not here, and neither is the vibration rung by
+the feed ramps: its in-phase and quadrature sizes split its amplitude by a
+phase the controller's ramp sets, and the amplitude, ``hypot`` of the two, is
+not a linear combination (the nightly fit still fits both).
 """
 
 from dataclasses import dataclass
