@@ -70,6 +70,9 @@ COMPETITIVE = 0.25
 # Trial refits take this many evaluations of the residual; the chosen one is then
 # refitted to convergence.
 TRIAL_NFEV = 2
+# A trial that ended worse than its model, refitted from the model, counts when it
+# realises this share of its screening's likelihood ratio.
+RESCUED_SHARE = 0.5
 # Grid points of the scan of a candidate with a single identifiable size.
 SCAN_POINTS = 13
 # A size is identifiable when its whole physical range moves the fit vector by
@@ -599,16 +602,21 @@ def grow(problem, outcome, candidates, alpha=0.01, alpha_separation=0.01, max_st
         for e in promising:
             trials[e] = _trial(problem, outcome, screens[e], first[e])
         # a trial that ended worse than its model, whose screening promised more than the
-        # best trial realised, could be the step: refitted from the model to convergence,
-        # and then the others too, so that converged fits are compared (it costs fits)
+        # best trial realised, could be the step: refitted from the model to convergence.
+        # It counts if it realises at least RESCUED_SHARE of that promise (else the screen
+        # saw a direction the model does not follow, and a converged fit would credit the
+        # candidate with the rest: a common first-order lag for a backlash of another
+        # shape); the others are then converged too, so that converged fits are compared
         realised = max(-t[1] for t in trials.values())
-        rescued = [e for e in promising if trials[e][1] > 0 and screens[e].lr > realised]
+        rescued = {}
+        for e in promising:
+            if trials[e][1] > 0 and screens[e].lr > realised:
+                rescue = _trial_from_model(problem, outcome, screens[e])
+                if -rescue[1] >= RESCUED_SHARE * screens[e].lr:
+                    rescued[e] = rescue
         if rescued:
             for e in promising:
-                if e in rescued:
-                    trials[e] = _trial_from_model(problem, outcome, screens[e])
-                else:
-                    trials[e] = _converged(problem, outcome, screens[e], trials[e])
+                trials[e] = rescued.get(e) or _converged(problem, outcome, screens[e], trials[e])
         best = min(trials, key=lambda e: trials[e][:2])
         p_adj, neg_lr, new, shapes = trials[best]
         lr = -neg_lr

@@ -50,7 +50,7 @@ A machine file (all sections optional; absent = ideal)::
     frequency_hz = 40.0
     damping_ratio = 0.05
     start_stop_m_s2 = 0.0         # the same mode rung at the corners of the feed ramps (30 ms on)
-    start_stop_quadrature_m_s2 = 0.0  # ... a quarter period later (a smooth ramp's jerk)
+    start_stop_quadrature_m_s2 = 0.0  # ... a quarter period later (a ramp of constant jerk)
 
     [gravity_coupling]            # carriage tilt leaking g*tilt into a channel
     x_per_x_urad_per_m = 0.0      # tilt seen by x per metre of X travel
