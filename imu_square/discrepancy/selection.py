@@ -26,7 +26,12 @@ Each step:
    (Bonferroni). The best refit is the step: refitted to convergence if
    either p-value is within reach (a trial's two iterations can leave a
    shape short of its optimum, a ringing's damping traded for its size,
-   and its sizes' Wald test then weak), the larger taken again there.
+   and its sizes' Wald test then weak), the larger taken again there. A
+   trial that ends worse than the model it extends started outside the
+   linear region; if its screening promised more than the best trial
+   realised, it is refitted from the model itself, and counts if it
+   realises ``RESCUED_SHARE`` of that promise (the other trials are then
+   converged too).
 3. It joins the model if its adjusted p-value is below ``alpha / m``
    (Bonferroni over the ``m`` candidates still out), ``alpha`` the stated
    significance level (1 % by default); else the growth stops. Effects
